@@ -1,0 +1,66 @@
+"""Speed and memory of ``hollowtree synth`` at growing point counts, side by side.
+
+Each size runs in its own process (so peak memory is that run's own) and the script
+prints points per second and peak resident memory per size, then the ratios that matter:
+peak memory of the largest over the smallest scan (flat = about 1) and throughput of the
+largest over the smallest. Run: ``python benchmarks/bench_synth.py [--site S] [--sizes ...]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+CHILD = r"""
+import json, resource, sys, time
+from pathlib import Path
+from scenes.synth import synth
+site, n, out = sys.argv[1], int(sys.argv[2]), Path(sys.argv[3])
+t0 = time.perf_counter()
+r = synth(site, out, n_points=n, overwrite=True)
+dt = time.perf_counter() - t0
+print(json.dumps({"points": r.n_points, "rays": r.n_rays, "seconds": dt,
+                  "scan_seconds": r.seconds, "step": r.step_deg,
+                  "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+                  "bytes": out.stat().st_size}))
+"""
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--site", default="wazir_khan")
+    ap.add_argument("--sizes", type=int, nargs="+", default=[1_000_000, 10_000_000, 100_000_000])
+    args = ap.parse_args()
+    repo = Path(__file__).resolve().parents[1]
+    env = dict(os.environ, PYTHONPATH=str(repo))
+    print(f"machine: {os.cpu_count()} cores, "
+          f"{os.sysconf('SC_PAGE_SIZE') * os.sysconf('SC_PHYS_PAGES') / 2**30:.0f} GiB")
+    print(f"{'points':>12} {'wall s':>8} {'Mpts/s':>8} {'Mrays/s':>8} {'peak MB':>8} {'MB on disk':>10}")
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in args.sizes:
+            out = Path(tmp) / f"{args.site}-{n}.laz"
+            res = subprocess.run([sys.executable, "-c", CHILD, args.site, str(n), str(out)],
+                                 env=env, capture_output=True, text=True, check=True)
+            row = json.loads(res.stdout.strip().splitlines()[-1])
+            rows.append(row)
+            print(f"{row['points']:>12,} {row['seconds']:>8.1f} "
+                  f"{row['points'] / row['seconds'] / 1e6:>8.2f} "
+                  f"{row['rays'] / row['seconds'] / 1e6:>8.2f} {row['peak_rss_mb']:>8.0f} "
+                  f"{row['bytes'] / 1e6:>10.1f}", flush=True)
+            out.unlink()
+    small, large = rows[0], rows[-1]
+    print(f"peak memory ratio (largest / smallest): {large['peak_rss_mb'] / small['peak_rss_mb']:.2f}")
+    rate = lambda r: r["points"] / r["seconds"]  # noqa: E731
+    print(f"throughput ratio (largest / smallest): {rate(large) / rate(small):.2f}")
+    print(f"largest run: {rate(large) / 1e6:.2f} M points/s "
+          f"({'meets' if rate(large) >= 1e6 else 'misses'} the 1 M points/s target)")
+
+
+if __name__ == "__main__":
+    main()

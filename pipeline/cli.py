@@ -1,0 +1,171 @@
+"""The ``hollowtree`` command.
+
+Logging handlers and progress bars are set up here and nowhere else. Every expected
+failure (a :class:`tiling.errors.PipelineError`) becomes one line on stderr and exit
+code 2; nothing is written in that case.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from collections.abc import Sequence
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+
+from tiling.errors import PipelineError
+
+__all__ = ["main", "build_parser"]
+
+logger = logging.getLogger("hollowtree")
+
+
+def _version() -> str:
+    try:
+        return version("hollowtree")
+    except PackageNotFoundError:  # running from a source tree that is not installed
+        return "unknown (not installed)"
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with exit code 2 and a one-line message for usage errors."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text.replace("_", ""))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive integer; got {value}")
+    return value
+
+
+def _float(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+
+
+def _non_negative(text: str) -> float:
+    value = _float(text)
+    if not value >= 0:
+        raise argparse.ArgumentTypeError(f"must be a non-negative number; got {text}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``hollowtree`` and its subcommands."""
+    parser = _Parser(
+        prog="hollowtree",
+        description="Labelled architectural elements from terrestrial laser scans.",
+    )
+    parser.add_argument("--version", action="version", version=f"hollowtree {_version()}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+
+    from scenes.sites import SITES, TEST_SCENES
+
+    s = sub.add_parser(
+        "synth",
+        help="make a labelled synthetic scan of a site (LAS/LAZ with gt_class, gt_instance)",
+        description=(
+            "Scan a synthetic site with a virtual terrestrial laser scanner and write a "
+            "LAS 1.4 / LAZ file with per-point ground truth, plus a Parquet table of the "
+            f"elements. Sites: {', '.join(SITES)}. Test scenes: {', '.join(TEST_SCENES)}."
+        ),
+    )
+    s.add_argument("site", help="site or test scene name")
+    s.add_argument("--out", required=True, type=Path, help="output .laz or .las file")
+    size = s.add_mutually_exclusive_group()
+    size.add_argument(
+        "--points", type=_positive_int, help="aim at about N points (default 1,000,000)"
+    )
+    size.add_argument("--step", type=_float, help="angular step of the scanner, degrees")
+    s.add_argument("--stations", type=_positive_int, help="use the first K stations of the site")
+    s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    s.add_argument(
+        "--noise", type=_non_negative, default=0.0025,
+        help="range noise standard deviation at 10 m, metres (default 0.0025)",
+    )
+    s.add_argument(
+        "--registration-error", type=_non_negative, default=0.0,
+        help="per-station registration error, metres (default 0)",
+    )
+    s.add_argument("--crs", help="coordinate reference system to record, e.g. EPSG:32643")
+    s.add_argument("--overwrite", action="store_true", help="replace an existing output")
+    s.add_argument("--no-progress", action="store_true", help="no progress bar")
+    s.set_defaults(func=_cmd_synth)
+    return parser
+
+
+def _cmd_synth(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from scenes.synth import synth
+
+    bars: list[tqdm] = []
+
+    def on_total(n: int) -> None:
+        # Called once the arguments are checked and the scene is built: no bar before.
+        bars.append(
+            tqdm(total=n, unit="ray", unit_scale=True, desc=f"scanning {args.site}",
+                 disable=args.no_progress, leave=False)
+        )
+
+    def on_rays(n: int) -> None:
+        bars[-1].update(n)
+
+    try:
+        result = synth(
+            args.site,
+            args.out,
+            n_points=args.points,
+            step_deg=args.step,
+            n_stations=args.stations,
+            seed=args.seed,
+            noise=args.noise,
+            registration_error=args.registration_error,
+            crs=args.crs,
+            overwrite=args.overwrite,
+            on_rays=on_rays,
+            on_total=on_total,
+        )
+    finally:
+        for bar in bars:
+            bar.close()
+    print(result.summary())
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``hollowtree`` console script."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version, usage errors (exit 2, one line)
+        return int(exc.code or 0) if not isinstance(exc.code, str) else 2
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.WARNING,
+        format="%(levelname)s %(name)s: %(message)s",
+    )
+    if args.command is None:
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args))
+    except PipelineError as exc:
+        print(f"hollowtree {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"hollowtree {args.command}: interrupted; nothing was written", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,80 @@
+"""The house rules that a reviewer would otherwise check by hand."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import tree
+from tiling import classes
+
+REPO = Path(__file__).resolve().parents[1]
+PACKAGES = ["pipeline", "tiling", "tree", "hollownet", "primitives", "scenes"]
+# Modules allowed to touch the outside world (files, CLI, cluster): the edges.
+EDGE_MODULES = {"pipeline/cli.py", "scenes/synth.py", "tiling/readers.py", "tiling/store.py"}
+FORBIDDEN_IN_KERNELS = {"dask", "zarr", "laspy", "yaml"}
+
+
+def _imports(path: Path) -> set[str]:
+    mods: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            mods |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            mods.add(node.module.split(".")[0])
+    return mods
+
+
+def _modules():
+    for pkg in PACKAGES:
+        for path in sorted((REPO / pkg).rglob("*.py")):
+            yield path.relative_to(REPO).as_posix(), path
+
+
+def test_top_level_layout():
+    for name in ["pyproject.toml", "README.md", "pipeline", "tiling", "tree", "hollownet",
+                 "tests", "workflows", "docs", "benchmarks", ".ci/run"]:
+        assert (REPO / name).exists(), name
+
+
+def test_tree_is_ours_not_dm_tree():
+    assert Path(tree.__file__).resolve().is_relative_to(REPO)
+
+
+def test_kernels_stay_pure():
+    for rel, path in _modules():
+        if rel in EDGE_MODULES:
+            continue
+        bad = _imports(path) & FORBIDDEN_IN_KERNELS
+        assert not bad, f"{rel} imports {bad}; only edge modules may"
+
+
+def test_class_vocabulary_is_defined_once():
+    """Class names appear as a table only in tiling/classes.py."""
+    names = {"ground", "wall", "roof", "arch", "dome", "minaret", "pillar", "other"}
+    for rel, path in _modules():
+        if rel == "tiling/classes.py":
+            continue
+        tree_ = ast.parse(path.read_text())
+        exported = {
+            id(n.value)
+            for n in ast.walk(tree_)
+            if isinstance(n, ast.Assign) and any(getattr(t, "id", "") == "__all__" for t in n.targets)
+        }
+        for node in ast.walk(tree_):
+            if id(node) in exported:  # __all__ may export builders called dome, arch, ...
+                continue
+            if isinstance(node, (ast.List, ast.Tuple, ast.Set, ast.Dict)):
+                elts = node.keys if isinstance(node, ast.Dict) else node.elts
+                strs = {e.value for e in elts if isinstance(e, ast.Constant) and isinstance(e.value, str)}
+                assert len(strs & names) < 4, f"{rel}:{node.lineno} redefines class names"
+    assert classes.CLASS_NAMES[5] == "dome"
+    assert classes.NUM_CLASSES == 9
+
+
+def test_no_upward_imports():
+    floor = {"tiling": 0, "primitives": 0, "scenes": 1, "hollownet": 1, "tree": 2, "pipeline": 3}
+    for rel, path in _modules():
+        own = floor[rel.split("/")[0]]
+        for mod in _imports(path) & floor.keys():
+            assert floor[mod] <= own, f"{rel} imports {mod}, a floor above it"
