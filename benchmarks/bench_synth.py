@@ -56,6 +56,10 @@ def main() -> None:
             out.unlink()
     small, large = rows[0], rows[-1]
     print(f"peak memory ratio (largest / smallest): {large['peak_rss_mb'] / small['peak_rss_mb']:.2f}")
+    if len(rows) > 2:
+        prev = rows[-2]
+        print(f"peak memory ratio ({large['points'] / 1e6:.0f} M / {prev['points'] / 1e6:.0f} M points): "
+              f"{large['peak_rss_mb'] / prev['peak_rss_mb']:.2f}")
     rate = lambda r: r["points"] / r["seconds"]  # noqa: E731
     print(f"throughput ratio (largest / smallest): {rate(large) / rate(small):.2f}")
     print(f"largest run: {rate(large) / 1e6:.2f} M points/s "
