@@ -101,7 +101,66 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--overwrite", action="store_true", help="replace an existing output")
     s.add_argument("--no-progress", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_synth)
+
+    g = sub.add_parser(
+        "ingest",
+        help="stream point files into a tiled, chunked Zarr run store",
+        description=(
+            "Tile LAS/LAZ/PLY/E57 files of one registered site into a Zarr v3 run store: "
+            "points routed to tiles with a buffer, Morton-sorted, original indices kept. "
+            "Rerunning the same command resumes an interrupted ingest."
+        ),
+    )
+    g.add_argument("inputs", nargs="+", type=Path, help="input files (one registered site)")
+    g.add_argument("--store", required=True, help="run store: a folder path or an fsspec URL")
+    g.add_argument("--tile-size", type=_float, default=50.0, help="tile core side, metres (default 50)")
+    g.add_argument("--buffer", type=_float, default=2.0, help="buffer width, metres (default 2)")
+    g.add_argument("--voxel", type=_float, help="keep one point per voxel of this size, metres")
+    g.add_argument("--bbox", type=_bbox, help="only tiles meeting XMIN,YMIN,XMAX,YMAX")
+    g.add_argument("--tiles", type=_int_list, help="only these tile ids, e.g. 0,1,5")
+    g.add_argument("--chunk-size", type=_positive_int, default=1_000_000,
+                   help="records per map task (default 1,000,000)")
+    g.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process; "
+                   "default: a local cluster of processes")
+    g.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
+    g.add_argument("--no-progress", action="store_true", help="no progress bars")
+    g.set_defaults(func=_cmd_ingest)
     return parser
+
+
+def _bbox(text: str) -> tuple[float, float, float, float]:
+    parts = text.split(",")
+    if len(parts) != 4:
+        raise argparse.ArgumentTypeError(f"expected XMIN,YMIN,XMAX,YMAX; got {text!r}")
+    vals = tuple(_float(p) for p in parts)
+    return vals  # type: ignore[return-value]
+
+
+def _int_list(text: str) -> tuple[int, ...]:
+    try:
+        return tuple(int(p) for p in text.split(",") if p.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected tile ids like 0,1,5; got {text!r}") from None
+
+
+def _cmd_ingest(args: argparse.Namespace) -> int:
+    from pipeline.graph import task_runner
+    from tiling.errors import ConfigError
+    from tiling.ingest import IngestParams, ingest
+
+    params = IngestParams(
+        tile_size=args.tile_size, buffer=args.buffer, voxel=args.voxel, bbox=args.bbox,
+        tiles=args.tiles, chunk_size=args.chunk_size,
+    )
+    try:
+        with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
+            report = ingest([str(p) for p in args.inputs], args.store, params, runner=run)
+    except OSError as exc:
+        if args.scheduler not in (None, "sync") and "scheduler" not in str(exc).lower():
+            raise ConfigError(f"cannot reach the Dask scheduler {args.scheduler}: {exc}") from None
+        raise
+    print(report.summary())
+    return 0
 
 
 def _cmd_synth(args: argparse.Namespace) -> int:

@@ -1,0 +1,92 @@
+"""Running units of work as Dask tasks: the only module (with tasks) that imports Dask.
+
+:func:`task_runner` yields a ``runner(fn, args_list, desc) -> results`` for the stage
+drivers (e.g. :func:`tiling.ingest.ingest`). Schedulers:
+
+- ``None``: a local Dask cluster of worker processes (``workers`` of them, one thread
+  each), started for the command and closed after it; its dashboard address is printed;
+- ``"sync"``: every task in this process, one after another (tests, debugging);
+- an address (``tcp://host:8786``): an existing Dask scheduler; the store must be a path
+  or URL that every worker reaches.
+
+Only small arguments travel in the graph (store URL, unit descriptions, attributes);
+each task reads and writes its own data in the store.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import sys
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
+
+from tqdm import tqdm
+
+__all__ = ["task_runner"]
+
+logger = logging.getLogger(__name__)
+
+Runner = Callable[[Callable[..., Any], Sequence[tuple[Any, ...]], str], list[Any]]
+
+
+def _bar(total: int, desc: str, progress: bool) -> tqdm:
+    return tqdm(total=total, desc=desc, unit="task", disable=not progress or total == 0,
+                leave=False, file=sys.stderr)
+
+
+def _sync_runner(progress: bool) -> Runner:
+    def run(fn: Callable[..., Any], args_list: Sequence[tuple[Any, ...]], desc: str) -> list[Any]:
+        out = []
+        with _bar(len(args_list), desc, progress) as bar:
+            for args in args_list:
+                out.append(fn(*args))
+                bar.update(1)
+        return out
+
+    return run
+
+
+def _client_runner(client: Any, progress: bool) -> Runner:
+    from distributed import as_completed
+
+    def run(fn: Callable[..., Any], args_list: Sequence[tuple[Any, ...]], desc: str) -> list[Any]:
+        if not args_list:
+            return []
+        futures = [client.submit(fn, *args, pure=False) for args in args_list]
+        try:
+            with _bar(len(futures), desc, progress) as bar:
+                for fut in as_completed(futures):
+                    if fut.status == "error":
+                        fut.result()  # raises the task's own exception
+                    bar.update(1)
+            return [f.result() for f in futures]
+        finally:
+            client.cancel([f for f in futures if not f.done()])
+
+    return run
+
+
+@contextlib.contextmanager
+def task_runner(
+    scheduler: str | None = None, *, workers: int = 2, progress: bool = True
+) -> Iterator[Runner]:
+    """Context manager yielding a runner on the chosen scheduler (see module notes)."""
+    if scheduler == "sync":
+        yield _sync_runner(progress)
+        return
+    from distributed import Client, LocalCluster
+
+    if scheduler is None:
+        with LocalCluster(
+            n_workers=workers, threads_per_worker=1, processes=True,
+            dashboard_address=":0", silence_logs=logging.ERROR,
+        ) as cluster, Client(cluster) as client:
+            if progress:
+                print(f"dask dashboard: {client.dashboard_link}", file=sys.stderr)
+            yield _client_runner(client, progress)
+        return
+    with Client(scheduler, timeout="20s") as client:
+        if progress:
+            print(f"dask dashboard: {client.dashboard_link}", file=sys.stderr)
+        yield _client_runner(client, progress)

@@ -1,0 +1,234 @@
+"""Ingest into the run store: round trip, resume after SIGKILL, refusals, bad input."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import laspy
+import numpy as np
+import pytest
+
+from pipeline.cli import main
+from pipeline.graph import task_runner
+from scenes.synth import synth
+from tiling.grid import TileGrid
+from tiling.ingest import IngestParams, ingest
+from tiling.store import RunStore, StoreError
+
+
+@pytest.fixture(scope="module")
+def scan_file(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("ingest") / "minaret.laz"
+    synth("minaret", out, n_points=60_000, seed=5)
+    return out
+
+
+def _ingest(inputs, store, **kw):
+    params = IngestParams(**{"tile_size": 10.0, "buffer": 1.0, "chunk_size": 20_000, **kw})
+    with task_runner("sync", progress=False) as run:
+        return ingest([str(p) for p in inputs], str(store), params, runner=run)
+
+
+def _tiles(store_path) -> dict[int, dict[str, np.ndarray]]:
+    store = RunStore.open(store_path)
+    recs = store.records("ingest")
+    return {int(t): store.read_unit(f"tiles/{t}") for t in recs}
+
+
+def test_round_trip(scan_file, tmp_path):
+    report = _ingest([scan_file], tmp_path / "s")
+    las = laspy.read(scan_file)
+    n = len(las.points)
+    store = RunStore.open(tmp_path / "s")
+    attrs = store.attrs
+    grid = TileGrid.from_dict(attrs["grid"])
+    scale, offset = np.array(attrs["coords"]["scale"]), np.array(attrs["coords"]["offset"])
+    tiles = _tiles(tmp_path / "s")
+    assert len(tiles) == grid.n_tiles == report.n_tiles
+
+    core_idx = np.concatenate([t["index"][t["core"]] for t in tiles.values()])
+    assert np.array_equal(np.sort(core_idx), np.arange(n, dtype=np.uint64))  # a permutation
+
+    world = np.stack([las.x, las.y, las.z], axis=1)
+    pt, tl, is_core = grid.route(world)
+    for tid, t in tiles.items():
+        xyz = t["xyz"] * scale + offset
+        idx = t["index"].astype(np.int64)
+        # coordinates within half a scale step of the source, attributes carried along
+        assert np.abs(xyz - world[idx]).max() <= 0.5 * las.header.scales.max() + 1e-9
+        assert np.array_equal(t["extra.gt_instance"], np.asarray(las.gt_instance)[idx])
+        assert np.array_equal(t["intensity"], np.asarray(las.intensity)[idx])
+        # the buffer holds exactly the neighbours' points within the buffer width
+        expected_buffer = np.sort(pt[(tl == tid) & ~is_core])
+        assert np.array_equal(np.sort(idx[~t["core"]]), expected_buffer)
+        assert np.array_equal(np.sort(idx[t["core"]]), np.sort(pt[(tl == tid) & is_core]))
+        # Morton order within the tile
+        if len(xyz) > 100:
+            step = np.linalg.norm(np.diff(xyz, axis=0), axis=1).mean()
+            shuffled = xyz[np.random.default_rng(0).permutation(len(xyz))]
+            assert step < 0.2 * np.linalg.norm(np.diff(shuffled, axis=0), axis=1).mean()
+
+
+def test_rerun_skips_everything(scan_file, tmp_path):
+    _ingest([scan_file], tmp_path / "s")
+    again = _ingest([scan_file], tmp_path / "s")
+    assert again.tiles_run == 0 and again.maps_run == 0
+    assert again.tiles_skipped == again.n_tiles
+
+
+def test_other_parameters_are_refused(scan_file, tmp_path, capsys):
+    _ingest([scan_file], tmp_path / "s")
+    code = main(["ingest", str(scan_file), "--store", str(tmp_path / "s"), "--tile-size", "20",
+                 "--buffer", "1", "--scheduler", "sync", "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "tile_size" in err and "10" in err and "20" in err
+
+
+def test_unknown_schema_version_is_refused(scan_file, tmp_path):
+    _ingest([scan_file], tmp_path / "s")
+    RunStore.open(tmp_path / "s", mode="a").update_attrs({"schema_version": 99})
+    with pytest.raises(StoreError, match="schema_version 99"):
+        RunStore.open(tmp_path / "s")
+
+
+def test_two_files_one_store(tmp_path):
+    a, b = tmp_path / "a.laz", tmp_path / "b.laz"
+    synth("pillar", a, n_points=8_000, seed=1)
+    synth("pillar", b, n_points=8_000, seed=2)
+    n = laspy.read(a).header.point_count + laspy.read(b).header.point_count
+    _ingest([a, b], tmp_path / "s")
+    core = np.concatenate([t["index"][t["core"]] for t in _tiles(tmp_path / "s").values()])
+    assert np.array_equal(np.sort(core), np.arange(n, dtype=np.uint64))
+
+
+def test_voxel_downsampling_maps_every_dropped_point(scan_file, tmp_path):
+    _ingest([scan_file], tmp_path / "s", voxel=0.25)
+    store = RunStore.open(tmp_path / "s")
+    scale = np.array(store.attrs["coords"]["scale"])
+    n = laspy.read(scan_file).header.point_count
+    kept, dropped = [], []
+    for t in _tiles(tmp_path / "s").values():
+        kept.append(t["index"][t["core"]])
+        dropped.append(t["voxel_dropped"])
+        rep = t["voxel_representative"]
+        assert np.isin(rep, t["index"][t["core"]]).all()
+        # one core point per voxel
+        key = np.floor(t["xyz"][t["core"]] * scale / 0.25).astype(np.int64)
+        assert len(np.unique(key, axis=0)) == len(key)
+    kept, dropped = np.concatenate(kept), np.concatenate(dropped)
+    assert len(kept) + len(dropped) == n
+    assert np.array_equal(np.sort(np.concatenate([kept, dropped])), np.arange(n, dtype=np.uint64))
+    assert len(kept) < 0.8 * n
+
+
+def test_bbox_subset(scan_file, tmp_path):
+    las = laspy.read(scan_file)
+    x, y = float(np.median(las.x)), float(np.median(las.y))
+    rep = _ingest([scan_file], tmp_path / "s", bbox=(x - 1, y - 1, x + 1, y + 1))
+    assert 1 <= rep.n_tiles <= 4
+    assert len(_tiles(tmp_path / "s")) == rep.n_tiles
+
+
+def _run_cli(scan_file, store, *extra):
+    return [sys.executable, "-m", "pipeline.cli", "ingest", str(scan_file), "--store", str(store),
+            "--tile-size", "8", "--buffer", "0.5", "--chunk-size", "5000", "--scheduler", "sync",
+            "--no-progress", *extra]
+
+
+def test_killed_ingest_resumes_to_the_same_store(scan_file, tmp_path):
+    ref, killed = tmp_path / "ref", tmp_path / "killed"
+    subprocess.run(_run_cli(scan_file, ref), check=True, capture_output=True)
+    proc = subprocess.Popen(_run_cli(scan_file, killed), stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    records = killed / "records" / "ingest"
+    deadline = time.time() + 120
+    while time.time() < deadline and proc.poll() is None:
+        if records.is_dir() and len(list(records.iterdir())) >= 3:
+            os.kill(proc.pid, signal.SIGKILL)
+            break
+        time.sleep(0.01)
+    proc.wait()
+    assert proc.returncode == -signal.SIGKILL, "the ingest finished before it could be killed"
+    partial = RunStore.open(killed).records("ingest")
+    total = RunStore.open(ref).records("ingest")
+    assert 0 < len(partial) < len(total)
+    out = subprocess.run(_run_cli(scan_file, killed), check=True, capture_output=True, text=True)
+    assert f"skipped {len(partial)}" in out.stdout
+    a, b = _tiles(ref), _tiles(killed)
+    assert a.keys() == b.keys()
+    for t in a:
+        assert a[t].keys() == b[t].keys()
+        for name in a[t]:
+            assert np.array_equal(a[t][name], b[t][name]), (t, name)
+    assert not list((killed / "fragments").glob("*.npy"))
+
+
+@pytest.mark.cluster
+def test_one_and_two_workers_give_the_same_store(scan_file, tmp_path):
+    params = IngestParams(tile_size=10.0, buffer=1.0, chunk_size=20_000)
+    with task_runner("sync", progress=False) as run:
+        ingest([str(scan_file)], str(tmp_path / "one"), params, runner=run)
+    with task_runner(None, workers=2, progress=False) as run:
+        ingest([str(scan_file)], str(tmp_path / "two"), params, runner=run)
+    a, b = _tiles(tmp_path / "one"), _tiles(tmp_path / "two")
+    assert a.keys() == b.keys()
+    for t in a:
+        for name in a[t]:
+            assert np.array_equal(a[t][name], b[t][name])
+
+
+def _fails(capsys, argv, needle):
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert needle in err
+    assert len(err.strip().splitlines()) == 1, err
+    return err
+
+
+def test_truncated_laz_is_refused_and_nothing_recorded(scan_file, tmp_path, capsys):
+    bad = tmp_path / "cut.laz"
+    bad.write_bytes(scan_file.read_bytes()[: scan_file.stat().st_size // 2])
+    _fails(capsys, ["ingest", str(bad), "--store", str(tmp_path / "s"), "--scheduler", "sync",
+                    "--tile-size", "10", "--no-progress"], "cut.laz")
+    if (tmp_path / "s").exists():
+        assert RunStore.open(tmp_path / "s").records("ingest") == {}
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [(["--tile-size", "0"], "tile_size"), (["--tile-size", "-5"], "tile_size"),
+     (["--buffer", "-1"], "buffer"), (["--buffer", "80"], "buffer"), (["--voxel", "0"], "voxel")],
+)
+def test_bad_parameters(scan_file, tmp_path, capsys, args, needle):
+    _fails(capsys, ["ingest", str(scan_file), "--store", str(tmp_path / "s"), "--scheduler", "sync",
+                    "--no-progress", *args], needle)
+    assert not (tmp_path / "s").exists()
+
+
+def test_unwritable_store(scan_file, tmp_path, capsys):
+    blocker = tmp_path / "file.txt"
+    blocker.write_text("x")
+    _fails(capsys, ["ingest", str(scan_file), "--store", str(blocker / "s"), "--scheduler", "sync",
+                    "--no-progress"], "does not exist")
+
+
+def test_missing_input(tmp_path, capsys):
+    _fails(capsys, ["ingest", str(tmp_path / "nope.laz"), "--store", str(tmp_path / "s"),
+                    "--scheduler", "sync", "--no-progress"], "nope.laz")
+    assert not (tmp_path / "s").exists()
+
+
+def test_different_crs_is_refused(tmp_path, capsys):
+    a, b = tmp_path / "a.laz", tmp_path / "b.laz"
+    synth("pillar", a, n_points=5_000, crs="EPSG:32643")
+    synth("pillar", b, n_points=5_000, crs="EPSG:32642")
+    _fails(capsys, ["ingest", str(a), str(b), "--store", str(tmp_path / "s"), "--scheduler", "sync",
+                    "--no-progress"], "coordinate reference systems")
+    assert not (tmp_path / "s").exists()

@@ -1,0 +1,515 @@
+"""Ingest: stream point files of any size into the tiles of a run store.
+
+Two phases of independent units, each unit a Dask task scheduled by ``pipeline/graph.py``
+(this module never imports Dask; the driver :func:`ingest` takes a ``runner``):
+
+- **map** (one unit per ``chunk_size`` records of one input file): read the records,
+  convert coordinates to the store's integer grid, route every point to its core tile and
+  to the tiles whose buffer holds it, and write one fragment per tile touched;
+- **reduce** (one unit per tile): gather the tile's fragments, sort the points in Morton
+  order, optionally keep one representative per voxel, write the tile's arrays.
+
+Each unit writes its completion record after its data. Rerunning the same ingest skips
+recorded units; a different parameter on an existing store is refused. Peak memory is
+set by ``chunk_size`` (map) and the largest tile (reduce), never by the scan.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from tiling.errors import ConfigError, CorruptInputError
+from tiling.grid import TileGrid, morton_order
+from tiling.readers import SourceInfo, probe, read_blocks
+from tiling.store import RunStore, StoreError, check_writable
+
+__all__ = [
+    "IngestParams",
+    "IngestPlan",
+    "MapUnit",
+    "plan_ingest",
+    "map_chunk",
+    "reduce_tile",
+    "ingest",
+    "IngestReport",
+    "Runner",
+]
+
+STAGE = "ingest"
+MAP_STAGE = "ingest.map"
+#: Coordinate resolution for inputs that store floats (PLY, E57): 0.1 mm.
+FLOAT_SOURCE_SCALE = 0.0001
+_INT32_MAX = 2**31 - 1
+
+#: ``runner(fn, args_list, desc) -> results`` runs ``fn(*args)`` for every entry (as Dask
+#: tasks or in process) and returns the results in order.
+Runner = Callable[[Callable[..., Any], Sequence[tuple[Any, ...]], str], list[Any]]
+
+
+@dataclass(frozen=True, kw_only=True)
+class IngestParams:
+    """Parameters of an ingest; every one is recorded in the store.
+
+    Parameters
+    ----------
+    tile_size : float
+        Side of a tile's core, metres (default 50).
+    buffer : float
+        Width of the ring of neighbours' points copied into each tile, metres (default 2).
+    voxel : float or None
+        Keep one point per voxel of this size (metres); None keeps every point.
+    bbox : (xmin, ymin, xmax, ymax) or None
+        Ingest only the tiles whose core intersects this box (world coordinates).
+    tiles : tuple of int or None
+        Ingest only these tile ids.
+    chunk_size : int
+        Records per map unit (sets the map phase's memory: about 150 bytes per record).
+    """
+
+    tile_size: float = 50.0
+    buffer: float = 2.0
+    voxel: float | None = None
+    bbox: tuple[float, float, float, float] | None = None
+    tiles: tuple[int, ...] | None = None
+    chunk_size: int = 1_000_000
+
+    def __post_init__(self) -> None:
+        def bad(name: str, rule: str, value: object) -> ConfigError:
+            return ConfigError(
+                f"The '{name}' parameter of ingest must be {rule}. Got {value!r} instead."
+            )
+
+        if not (isinstance(self.tile_size, (int, float)) and math.isfinite(self.tile_size) and self.tile_size > 0):
+            raise bad("tile_size", "a float in the range (0.0, inf)", self.tile_size)
+        if not (isinstance(self.buffer, (int, float)) and math.isfinite(self.buffer) and 0 <= self.buffer < self.tile_size):
+            raise bad("buffer", f"a float in the range [0.0, tile_size={self.tile_size})", self.buffer)
+        if self.voxel is not None and not (math.isfinite(self.voxel) and self.voxel > 0):
+            raise bad("voxel", "a float in the range (0.0, inf) or None", self.voxel)
+        if self.bbox is not None:
+            b = tuple(float(v) for v in self.bbox)
+            if len(b) != 4 or not all(math.isfinite(v) for v in b) or b[0] >= b[2] or b[1] >= b[3]:
+                raise bad("bbox", "(xmin, ymin, xmax, ymax) with xmin < xmax and ymin < ymax", self.bbox)
+            object.__setattr__(self, "bbox", b)
+        if self.tiles is not None:
+            t = tuple(int(v) for v in self.tiles)
+            if not t or min(t) < 0:
+                raise bad("tiles", "a non-empty list of tile ids >= 0", self.tiles)
+            object.__setattr__(self, "tiles", tuple(sorted(set(t))))
+        if not (isinstance(self.chunk_size, int) and self.chunk_size > 0):
+            raise bad("chunk_size", "an int in the range [1, inf)", self.chunk_size)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["bbox"] = list(self.bbox) if self.bbox is not None else None
+        d["tiles"] = list(self.tiles) if self.tiles is not None else None
+        return d
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> IngestParams:
+        d = dict(data)
+        if d.get("bbox") is not None:
+            d["bbox"] = tuple(d["bbox"])
+        if d.get("tiles") is not None:
+            d["tiles"] = tuple(d["tiles"])
+        return cls(**d)
+
+
+@dataclass(frozen=True, kw_only=True)
+class MapUnit:
+    """One map task: records ``[start, stop)`` of source ``source``."""
+
+    map_id: int
+    source: int
+    path: str
+    base: int  # global index of the source's first record
+    start: int
+    stop: int
+
+
+@dataclass(frozen=True, kw_only=True)
+class IngestPlan:
+    """Everything the tasks need, fixed before any of them runs."""
+
+    sources: tuple[SourceInfo, ...]
+    grid: TileGrid
+    scale: tuple[float, float, float]
+    offset: tuple[float, float, float]
+    tiles: tuple[int, ...]
+    fields: dict[str, list[Any]]  # name -> [dtype str, trailing shape]
+    params: IngestParams
+    units: tuple[MapUnit, ...] = field(repr=False)
+    params_hash: str = ""
+
+    def attrs(self) -> dict[str, Any]:
+        """The root attributes that describe this ingest."""
+        return {
+            "sources": [s.to_dict() for s in self.sources],
+            "grid": self.grid.to_dict(),
+            "coords": {"dtype": "int32", "scale": list(self.scale), "offset": list(self.offset)},
+            "fields": self.fields,
+            "ingest": {"params": self.params.to_dict(), "params_hash": self.params_hash,
+                       "tiles": list(self.tiles)},
+        }
+
+
+def _source_bounds(info: SourceInfo, chunk_size: int) -> tuple[np.ndarray, np.ndarray]:
+    if info.mins is not None and info.maxs is not None:
+        return np.asarray(info.mins, float), np.asarray(info.maxs, float)
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for block in read_blocks(info.path, chunk_size=chunk_size):
+        if len(block.xyz):
+            lo = np.minimum(lo, block.xyz.min(axis=0))
+            hi = np.maximum(hi, block.xyz.max(axis=0))
+    return lo, hi
+
+
+def _fields(sources: Sequence[SourceInfo]) -> dict[str, list[Any]]:
+    """Per-point fields of the store: those any source has, with their dtypes."""
+    out: dict[str, list[Any]] = {}
+    if any(s.has_intensity for s in sources):
+        out["intensity"] = ["uint16", []]
+    if any(s.has_rgb for s in sources):
+        out["rgb"] = ["uint16", [3]]
+    if any(s.has_returns for s in sources):
+        out["return_number"] = ["uint8", []]
+        out["number_of_returns"] = ["uint8", []]
+    if any(s.has_gps_time for s in sources):
+        out["gps_time"] = ["float64", []]
+    for s in sources:
+        if not s.extra_dims:
+            continue
+        block = next(iter(read_blocks(s.path, chunk_size=1, stop=1)), None)
+        if block is None:
+            continue
+        for name, values in block.extra.items():
+            key = f"extra.{name}"
+            if key not in out:
+                out[key] = [np.asarray(values).dtype.str, list(np.asarray(values).shape[1:])]
+    return out
+
+
+def plan_ingest(inputs: Sequence[str | Path], params: IngestParams) -> IngestPlan:
+    """Probe the inputs and fix the grid, the coordinate grid and the map units.
+
+    Raises
+    ------
+    ConfigError, InputFileError, CorruptInputError, UnsupportedInputError
+        On a bad input or parameter; nothing has been written then.
+    """
+    if not inputs:
+        raise ConfigError("ingest needs at least one input file")
+    sources = tuple(probe(p) for p in inputs)
+    crs = {s.crs_wkt for s in sources if s.crs_wkt}
+    if len(crs) > 1:
+        named = ", ".join(Path(s.path).name for s in sources if s.crs_wkt)
+        raise ConfigError(f"inputs {named} have different coordinate reference systems; reproject them to one first")
+    for s in sources:
+        if s.point_count == 0:
+            raise CorruptInputError(f"{s.path}: holds no points")
+    bounds = [_source_bounds(s, params.chunk_size) for s in sources]
+    lo = np.min([b[0] for b in bounds], axis=0)
+    hi = np.max([b[1] for b in bounds], axis=0)
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        raise CorruptInputError(f"{sources[0].path}: no finite coordinates in the inputs")
+    grid = TileGrid.covering(lo[0], lo[1], hi[0], hi[1], tile_size=params.tile_size, buffer=params.buffer)
+
+    las = [s for s in sources if s.scale is not None]
+    scale = np.full(3, FLOAT_SOURCE_SCALE)
+    if las:
+        scale = np.min([np.asarray(s.scale, float) for s in las], axis=0)
+        if any(s.scale is None for s in sources):
+            scale = np.minimum(scale, FLOAT_SOURCE_SCALE)
+    if las and las[0].offset is not None:
+        offset = np.asarray(las[0].offset, float)
+    else:
+        offset = np.floor(lo)
+    span = np.maximum(np.abs(hi - offset), np.abs(lo - offset)) / scale
+    if np.any(span > _INT32_MAX):
+        raise ConfigError(
+            f"the inputs span {hi - lo} m: too large for int32 coordinates at scale {scale.tolist()}"
+        )
+
+    all_tiles = np.arange(grid.n_tiles)
+    if params.tiles is not None:
+        if max(params.tiles) >= grid.n_tiles:
+            raise ConfigError(
+                f"tile {max(params.tiles)} does not exist: the grid has {grid.n_tiles} tiles (0-{grid.n_tiles - 1})"
+            )
+        all_tiles = np.asarray(params.tiles)
+    if params.bbox is not None:
+        xmin, ymin, xmax, ymax = params.bbox
+        keep = []
+        for t in all_tiles:
+            x0, y0, x1, y1 = grid.core_bounds(int(t))
+            if x0 < xmax and xmin < x1 and y0 < ymax and ymin < y1:
+                keep.append(int(t))
+        if not keep:
+            raise ConfigError(f"bbox {list(params.bbox)} meets no tile of the inputs' extent {lo[:2].tolist()}-{hi[:2].tolist()}")
+        all_tiles = np.asarray(keep)
+
+    units = []
+    base = 0
+    for i, s in enumerate(sources):
+        for start in range(0, s.point_count, params.chunk_size):
+            units.append(MapUnit(map_id=len(units), source=i, path=s.path, base=base, start=start,
+                                 stop=min(start + params.chunk_size, s.point_count)))
+        base += s.point_count
+    plan = IngestPlan(
+        sources=sources, grid=grid, scale=tuple(scale.tolist()), offset=tuple(offset.tolist()),
+        tiles=tuple(int(t) for t in all_tiles), fields=_fields(sources), params=params,
+        units=tuple(units),
+    )
+    identity = {k: v for k, v in plan.attrs().items() if k != "ingest"}
+    identity["params"] = params.to_dict()
+    identity["sources"] = [
+        {"path": str(Path(s.path).resolve()), "size": s.size_bytes, "points": s.point_count} for s in sources
+    ]
+    digest = hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()[:16]
+    return IngestPlan(**{**plan.__dict__, "params_hash": digest})
+
+
+def _dtype(fields: dict[str, list[Any]]) -> np.dtype:
+    spec = [("xyz", "<i4", (3,)), ("index", "<u8"), ("core", "?"), ("core_tile", "<i8")]
+    for name, (dt, shape) in fields.items():
+        spec.append((name, dt, tuple(shape)) if shape else (name, dt))
+    return np.dtype(spec)
+
+
+def fragment_key(map_id: int, tile: int) -> str:
+    return f"m{map_id:07d}_t{tile:07d}"
+
+
+def map_chunk(url: str, unit: MapUnit, plan_attrs: dict[str, Any]) -> dict[str, int]:
+    """Map task: route records of ``unit`` to tiles; write fragments, then the record.
+
+    Returns ``{tile: number of points}`` for the tiles this unit wrote.
+    """
+    store = RunStore.open(url, mode="a")
+    grid = TileGrid.from_dict(plan_attrs["grid"])
+    scale = np.asarray(plan_attrs["coords"]["scale"])
+    offset = np.asarray(plan_attrs["coords"]["offset"])
+    fields = plan_attrs["fields"]
+    wanted = np.zeros(grid.n_tiles, dtype=bool)
+    wanted[plan_attrs["ingest"]["tiles"]] = True
+    dtype = _dtype(fields)
+    parts: dict[int, list[np.ndarray]] = {}
+    for block in read_blocks(unit.path, chunk_size=unit.stop - unit.start, start=unit.start, stop=unit.stop):
+        if not len(block.xyz):
+            continue
+        point, tile, is_core = grid.route(block.xyz, outside="flag")
+        if np.count_nonzero(is_core) != len(block.xyz):  # each point has one core pair
+            raise CorruptInputError(
+                f"{unit.path}: points outside the bounds its header gives (records {unit.start}-{unit.stop})"
+            )
+        core_of_point = np.empty(len(block.xyz), dtype=np.int64)
+        core_of_point[point[is_core]] = tile[is_core]
+        keep = wanted[tile]
+        point, tile, is_core = point[keep], tile[keep], is_core[keep]
+        core_tile = core_of_point[point]
+        rec = np.zeros(len(point), dtype=dtype)
+        rec["xyz"] = np.round((block.xyz[point] - offset) / scale).astype(np.int32)
+        rec["index"] = block.index[point] + np.uint64(unit.base)
+        rec["core"] = is_core
+        rec["core_tile"] = core_tile
+        for name in fields:
+            src = block.extra.get(name[6:]) if name.startswith("extra.") else getattr(block, name)
+            if src is not None:
+                rec[name] = np.asarray(src)[point]
+        order = np.argsort(tile, kind="stable")
+        tile, rec = tile[order], rec[order]
+        cuts = np.flatnonzero(np.r_[True, tile[1:] != tile[:-1], True])
+        for a, b in zip(cuts[:-1], cuts[1:], strict=True):
+            parts.setdefault(int(tile[a]), []).append(rec[a:b])
+    counts: dict[str, int] = {}
+    for t, pieces in parts.items():
+        table = np.concatenate(pieces)
+        store.write_fragment(fragment_key(unit.map_id, t), table)
+        counts[str(t)] = len(table)
+    store.record(MAP_STAGE, str(unit.map_id), {"params_hash": plan_attrs["ingest"]["params_hash"], "tiles": counts})
+    return counts
+
+
+def _voxel_representatives(
+    xyz: npt.NDArray[np.int32], index: npt.NDArray[np.uint64], core_tile: npt.NDArray[np.int64],
+    *, scale: npt.NDArray[np.float64], voxel: float,
+) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.int64]]:
+    """Keep-mask (one point per voxel and core tile: the lowest index) and, for every
+    point, the row of its representative."""
+    key = np.floor(xyz * (scale / voxel)).astype(np.int64)
+    order = np.lexsort((index, core_tile, key[:, 2], key[:, 1], key[:, 0]))
+    k, c = key[order], core_tile[order]
+    first = np.r_[True, np.any(k[1:] != k[:-1], axis=1) | (c[1:] != c[:-1])]
+    group_first = order[np.flatnonzero(first)]
+    rep = np.empty(len(index), dtype=np.int64)
+    rep[order] = group_first[np.cumsum(first) - 1]
+    keep = np.zeros(len(index), dtype=bool)
+    keep[group_first] = True
+    return keep, rep
+
+
+def reduce_tile(url: str, tile: int, keys: Sequence[str], plan_attrs: dict[str, Any]) -> int:
+    """Reduce task: gather a tile's fragments, Morton-sort, downsample, write, record.
+
+    Returns the number of points written to the tile.
+    """
+    store = RunStore.open(url, mode="a")
+    fields = plan_attrs["fields"]
+    scale = np.asarray(plan_attrs["coords"]["scale"])
+    grid = TileGrid.from_dict(plan_attrs["grid"])
+    params = plan_attrs["ingest"]["params"]
+    pieces = [store.read_fragment(k) for k in keys]
+    table = np.concatenate(pieces) if pieces else np.zeros(0, dtype=_dtype(fields))
+    # Fragments arrive in map order; sort by original index first so the result never
+    # depends on which fragment came first, then spatially.
+    table = table[np.argsort(table["index"], kind="stable")]
+    arrays: dict[str, np.ndarray] = {}
+    if params.get("voxel") and len(table):
+        keep, rep = _voxel_representatives(
+            table["xyz"], table["index"], table["core_tile"], scale=scale, voxel=params["voxel"]
+        )
+        dropped = table["core"] & ~keep
+        arrays["voxel_dropped"] = table["index"][dropped]
+        arrays["voxel_representative"] = table["index"][rep[dropped]]
+        table = table[keep]
+    if len(table):
+        x0, y0, _, _ = grid.buffered_bounds(tile)
+        cell = max(1.0, round(0.01 / float(scale.min())))  # 1 cm Morton cells
+        origin = np.array([(x0 - plan_attrs["coords"]["offset"][0]) / scale[0],
+                           (y0 - plan_attrs["coords"]["offset"][1]) / scale[1],
+                           float(table["xyz"][:, 2].min())])
+        table = table[morton_order(table["xyz"].astype(np.float64), origin=origin, cell=cell)]
+    arrays.update({"xyz": table["xyz"], "index": table["index"], "core": table["core"]})
+    for name in fields:
+        arrays[name] = table[name]
+    store.write_unit(f"tiles/{tile}", arrays)
+    store.record(STAGE, str(tile), {
+        "params_hash": plan_attrs["ingest"]["params_hash"],
+        "n_points": int(len(table)),
+        "n_core": int(table["core"].sum()),
+    })
+    store.delete_fragments(keys)
+    return int(len(table))
+
+
+@dataclass(frozen=True, kw_only=True)
+class IngestReport:
+    """What an ingest did."""
+
+    store: str
+    n_tiles: int
+    n_points_in: int
+    n_core_points: int
+    n_buffer_points: int
+    maps_run: int
+    maps_skipped: int
+    tiles_run: int
+    tiles_skipped: int
+    seconds: float
+
+    def summary(self) -> str:
+        return (
+            f"{self.store}: {self.n_tiles} tiles, {self.n_core_points:,} core + "
+            f"{self.n_buffer_points:,} buffer points from {self.n_points_in:,} input points "
+            f"in {self.seconds:.1f} s (map units run {self.maps_run}, skipped "
+            f"{self.maps_skipped}; tiles run {self.tiles_run}, skipped {self.tiles_skipped})"
+        )
+
+
+def _differences(old: dict[str, Any], new: dict[str, Any], prefix: str = "") -> list[str]:
+    out = []
+    for k in sorted(set(old) | set(new)):
+        a, b = old.get(k), new.get(k)
+        if isinstance(a, dict) and isinstance(b, dict):
+            out += _differences(a, b, f"{prefix}{k}.")
+        elif a != b:
+            out.append(f"{prefix}{k}: store has {a!r}, this run asks for {b!r}")
+    return out
+
+
+def open_for_ingest(url: str, plan: IngestPlan) -> RunStore:
+    """Create the store, or reopen it to resume the same ingest; refuse another one."""
+    attrs = plan.attrs()
+    if RunStore.exists(url):
+        store = RunStore.open(url, mode="a")
+        old = store.attrs.get("ingest", {})
+        if old.get("params_hash") != plan.params_hash:
+            diffs = _differences(old.get("params", {}), plan.params.to_dict())
+            old_src = [(s.get("path"), s.get("size_bytes")) for s in store.attrs.get("sources", [])]
+            new_src = [(s.path, s.size_bytes) for s in plan.sources]
+            if old_src != new_src:
+                diffs.append(f"inputs: store has {[p for p, _ in old_src]}, this run asks for {[p for p, _ in new_src]}")
+            what = "; ".join(diffs) if diffs else "the inputs changed"
+            raise StoreError(f"store {url} holds another ingest ({what}); use a new store")
+        return store
+    check_writable(url)
+    return RunStore.create(url, attrs=attrs)
+
+
+def ingest(
+    inputs: Sequence[str | Path],
+    url: str | Path,
+    params: IngestParams,
+    *,
+    runner: Runner,
+) -> IngestReport:
+    """Ingest ``inputs`` into the run store at ``url``, resuming a previous run there.
+
+    Parameters
+    ----------
+    inputs : sequence of paths
+        LAS/LAZ/PLY/E57 files of one registered site, in order (the original index of a
+        point is its position in their concatenation).
+    url : str or Path
+        Local path or fsspec URL of the store.
+    params : IngestParams
+    runner : callable
+        ``runner(fn, args_list, desc)``; see :data:`Runner`.
+    """
+    t0 = time.perf_counter()
+    url = str(url)
+    plan = plan_ingest(inputs, params)
+    store = open_for_ingest(url, plan)
+    attrs = store.attrs
+    h = plan.params_hash
+
+    done_maps = {k: v for k, v in store.records(MAP_STAGE).items() if v.get("params_hash") == h}
+    done_tiles = {k for k, v in store.records(STAGE).items() if v.get("params_hash") == h}
+    todo_units = [u for u in plan.units if str(u.map_id) not in done_maps]
+    # Map units are needed only while some tile is not recorded yet.
+    if len(done_tiles) == len(plan.tiles):
+        todo_units = []
+    results = runner(map_chunk, [(url, u, attrs) for u in todo_units], "ingest: map")
+    tiles_of: dict[int, dict[str, int]] = {int(k): v["tiles"] for k, v in done_maps.items()}
+    for u, counts in zip(todo_units, results, strict=True):
+        tiles_of[u.map_id] = counts
+    keys: dict[int, list[str]] = {t: [] for t in plan.tiles}
+    for map_id in sorted(tiles_of):
+        for t in tiles_of[map_id]:
+            if int(t) in keys:
+                keys[int(t)].append(fragment_key(map_id, int(t)))
+    todo_tiles = [t for t in plan.tiles if str(t) not in done_tiles]
+    runner(reduce_tile, [(url, t, keys[t], attrs) for t in todo_tiles], "ingest: tiles")
+    store.delete_fragments()
+
+    recs = store.records(STAGE)
+    n_core = sum(int(recs[str(t)]["n_core"]) for t in plan.tiles)
+    n_all = sum(int(recs[str(t)]["n_points"]) for t in plan.tiles)
+    store.update_attrs({"stages": {**store.attrs.get("stages", {}), STAGE: {
+        "params_hash": h, "units": len(plan.tiles), "done": len(plan.tiles)}}})
+    return IngestReport(
+        store=url, n_tiles=len(plan.tiles), n_points_in=sum(s.point_count for s in plan.sources),
+        n_core_points=n_core, n_buffer_points=n_all - n_core,
+        maps_run=len(todo_units), maps_skipped=len(plan.units) - len(todo_units),
+        tiles_run=len(todo_tiles), tiles_skipped=len(plan.tiles) - len(todo_tiles),
+        seconds=time.perf_counter() - t0,
+    )

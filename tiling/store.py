@@ -1,0 +1,233 @@
+"""The run store: one Zarr v3 group per run, the only module that imports zarr.
+
+Layout (``docs/store.md`` is the reference)::
+
+    <store>/zarr.json              root attrs: schema_version, sources, grid, coords, ingest
+    <store>/tiles/<tile>/          one group per tile: xyz, index, core, ... (whole chunks)
+    <store>/fragments/<key>.npy    map-phase output (plain .npy), deleted once its tile is recorded
+    <store>/records/<stage>/<unit> completion records: one group per finished unit
+
+Completion records are written by the task that made the unit, after its data, as one
+small object each (never a shared object that several writers rewrite), so a crash or a
+SIGKILL can leave a unit unrecorded but never a record without its data. Readers trust
+only recorded units.
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+import os
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import zarr
+from zarr.codecs import BloscCodec
+
+from tiling.errors import ConfigError, InputFileError, PipelineError
+
+__all__ = ["SCHEMA_VERSION", "CHUNK_POINTS", "RunStore", "StoreError", "check_writable"]
+
+logger = logging.getLogger(__name__)
+
+#: Version of the layout; a store of another version is refused.
+SCHEMA_VERSION = 1
+#: Points per chunk along the first axis (about 3 MB of int32 xyz, 2 MB of uint64 index).
+CHUNK_POINTS = 262_144
+_COMPRESSOR = BloscCodec(cname="lz4", clevel=5, shuffle="shuffle")
+
+
+class StoreError(PipelineError, ValueError):
+    """The run store is missing, of another schema version, or cannot be written."""
+
+
+def _is_url(url: str) -> bool:
+    return "://" in url and not url.startswith("file://")
+
+
+class RunStore:
+    """A run store opened for reading and writing.
+
+    Use :meth:`create` for a new store (or to reopen one for resuming) and :meth:`open`
+    for an existing one.
+    """
+
+    def __init__(self, root: zarr.Group, url: str) -> None:
+        self._root = root
+        self.url = url
+
+    # ------------------------------------------------------------------ opening
+    @classmethod
+    def open(cls, url: str | Path, *, mode: str = "r") -> RunStore:
+        """Open an existing store; refuse a missing one or an unknown schema version."""
+        url = str(url)
+        if not _is_url(url) and not (Path(url) / "zarr.json").is_file():
+            raise InputFileError(f"store {url} does not exist (no zarr.json there)")
+        try:
+            root = zarr.open_group(store=url, mode=mode)
+        except Exception as exc:  # zarr raises many types for a damaged store
+            raise StoreError(f"store {url} cannot be opened: {exc}") from None
+        version = root.attrs.get("schema_version")
+        if version != SCHEMA_VERSION:
+            raise StoreError(
+                f"store {url} has schema_version {version!r}; this hollowtree reads "
+                f"version {SCHEMA_VERSION} only"
+            )
+        return cls(root, url)
+
+    @classmethod
+    def create(cls, url: str | Path, *, attrs: Mapping[str, Any]) -> RunStore:
+        """Create a new store with root ``attrs`` (plus ``schema_version``)."""
+        url = str(url)
+        if not _is_url(url):
+            parent = Path(url).resolve().parent
+            if not parent.is_dir():
+                raise StoreError(f"store {url}: folder {parent} does not exist")
+            if Path(url).exists() and any(Path(url).iterdir()):
+                raise StoreError(f"store {url} exists and is not a hollowtree store")
+        try:
+            root = zarr.open_group(store=url, mode="w")
+            root.attrs.update({"schema_version": SCHEMA_VERSION, **attrs})
+            for name in ("tiles", "fragments", "records"):
+                root.require_group(name)
+        except PermissionError as exc:
+            raise StoreError(f"store {url} cannot be written: {exc.strerror}") from None
+        except OSError as exc:
+            raise StoreError(f"store {url} cannot be written: {exc}") from None
+        return cls(root, url)
+
+    @staticmethod
+    def exists(url: str | Path) -> bool:
+        """Whether a store (any version) is at ``url``."""
+        url = str(url)
+        if _is_url(url):
+            try:
+                zarr.open_group(store=url, mode="r")
+            except Exception:
+                return False
+            return True
+        return (Path(url) / "zarr.json").is_file()
+
+    # ------------------------------------------------------------------ attributes
+    @property
+    def attrs(self) -> dict[str, Any]:
+        """Root attributes (a copy)."""
+        return dict(self._root.attrs)
+
+    def update_attrs(self, values: Mapping[str, Any]) -> None:
+        """Update root attributes (driver only: never from a task)."""
+        self._root.attrs.update(dict(values))
+
+    # ------------------------------------------------------------------ tiles
+    def write_unit(self, group: str, arrays: Mapping[str, npt.NDArray[Any]]) -> None:
+        """Write ``arrays`` into group path ``group`` (replacing what was there)."""
+        g = self._root.require_group(group)
+        for name in list(g.array_keys()):
+            if name not in arrays:
+                del g[name]
+        for name, values in arrays.items():
+            values = np.ascontiguousarray(values)
+            chunks = (CHUNK_POINTS,) + values.shape[1:]
+            arr = g.create_array(
+                name,
+                shape=values.shape,
+                dtype=values.dtype,
+                chunks=chunks,
+                compressors=_COMPRESSOR,
+                overwrite=True,
+            )
+            if values.size:
+                arr[...] = values
+
+    def read_unit(self, group: str, names: Iterable[str] | None = None) -> dict[str, np.ndarray]:
+        """Read arrays of group path ``group`` (all, or ``names``)."""
+        g = self._root[group]
+        keys = list(g.array_keys()) if names is None else list(names)
+        return {k: g[k][...] for k in keys}
+
+    def unit_arrays(self, group: str) -> list[str]:
+        """Names of the arrays in group path ``group``."""
+        return sorted(self._root[group].array_keys())
+
+    # ------------------------------------------------------------------ fragments
+    def _fs(self) -> tuple[Any, str]:
+        import fsspec
+
+        fs, root = fsspec.core.url_to_fs(self.url)
+        return fs, root.rstrip("/") + "/fragments"
+
+    def write_fragment(self, key: str, table: npt.NDArray[np.void]) -> None:
+        """Store a structured array as ``fragments/<key>.npy``.
+
+        Fragments are scratch data between the map and the reduce phase: plain ``.npy``
+        objects beside the Zarr hierarchy (through fsspec, so any store URL works),
+        written about 40x faster than a one-chunk Zarr array of the same bytes.
+        """
+        fs, base = self._fs()
+        with fs.open(f"{base}/{key}.npy", "wb") as f:
+            np.save(f, table, allow_pickle=False)
+
+    def read_fragment(self, key: str) -> npt.NDArray[np.void]:
+        fs, base = self._fs()
+        with fs.open(f"{base}/{key}.npy", "rb") as f:
+            return np.load(io.BytesIO(f.read()), allow_pickle=False)
+
+    def delete_fragments(self, keys: Iterable[str] | None = None) -> None:
+        """Delete the given fragments (all when ``keys`` is None)."""
+        fs, base = self._fs()
+        if keys is None:
+            paths = fs.glob(f"{base}/*.npy")
+        else:
+            paths = [f"{base}/{k}.npy" for k in keys]
+        for path in paths:
+            if fs.exists(path):
+                fs.rm(path)
+
+    # ------------------------------------------------------------------ records
+    def record(self, stage: str, unit: str, info: Mapping[str, Any]) -> None:
+        """Record unit ``unit`` of ``stage`` as done. Call only after its data is written."""
+        g = self._root["records"].require_group(stage)
+        # One write of one small object: the group and its attributes together.
+        g.create_group(str(unit), attributes=dict(info), overwrite=True)
+
+    def records(self, stage: str) -> dict[str, dict[str, Any]]:
+        """Completion records of ``stage``: unit -> info. Unreadable records are skipped."""
+        recs = self._root["records"]
+        if stage not in set(recs.group_keys()):
+            return {}
+        out: dict[str, dict[str, Any]] = {}
+        g = recs[stage]
+        for unit in g.group_keys():
+            try:
+                info = dict(g[unit].attrs)
+            except Exception:  # a torn record counts as not done
+                logger.warning("unreadable record %s/%s ignored", stage, unit)
+                continue
+            if info:
+                out[unit] = info
+        return out
+
+    def clear_records(self, stage: str) -> None:
+        """Forget every record of ``stage``."""
+        recs = self._root["records"]
+        if stage in set(recs.group_keys()):
+            del recs[stage]
+
+
+def check_writable(url: str | Path) -> None:
+    """Raise :class:`StoreError` if a local store path cannot be created or written."""
+    url = str(url)
+    if _is_url(url):
+        return
+    p = Path(url)
+    parent = p.resolve().parent
+    if not parent.is_dir():
+        raise StoreError(f"store {url}: folder {parent} does not exist")
+    target = p if p.exists() else parent
+    if not os.access(target, os.W_OK):
+        raise StoreError(f"store {url} cannot be written (no write permission on {target})")
+    if p.exists() and not p.is_dir():
+        raise ConfigError(f"store {url} is a file, not a folder")
