@@ -113,7 +113,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     g.add_argument("inputs", nargs="+", type=Path, help="input files (one registered site)")
     g.add_argument("--store", required=True, help="run store: a folder path or an fsspec URL")
-    g.add_argument("--tile-size", type=_float, default=50.0, help="tile core side, metres (default 50)")
+    g.add_argument("--tile-size", type=_tile_size, default=None,
+                   help="tile core side, metres, or 'auto' (default: about 2 M points per tile)")
     g.add_argument("--buffer", type=_float, default=2.0, help="buffer width, metres (default 2)")
     g.add_argument("--voxel", type=_float, help="keep one point per voxel of this size, metres")
     g.add_argument("--bbox", type=_bbox, help="only tiles meeting XMIN,YMIN,XMAX,YMAX")
@@ -126,6 +127,10 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--no-progress", action="store_true", help="no progress bars")
     g.set_defaults(func=_cmd_ingest)
     return parser
+
+
+def _tile_size(text: str) -> float | None:
+    return None if text.strip().lower() == "auto" else _float(text)
 
 
 def _bbox(text: str) -> tuple[float, float, float, float]:

@@ -310,7 +310,8 @@ class TileGrid:
 
         Notes
         -----
-        Memory: ``9 * n_points`` bools plus three arrays of length ``n_pairs``.
+        Memory: a few arrays of length ``n_points`` and ``n_pairs``; the 3 x 3
+        neighbourhood is built only for points within ``buffer`` of an inner edge.
 
         Examples
         --------
@@ -326,6 +327,17 @@ class TileGrid:
         b = self.buffer
         ok = core >= 0
         cix, ciy = np.where(ok, core % nx, 0), np.where(ok, core // nx, 0)
+        x, y = pts[:, 0], pts[:, 1]
+        # Only points within `buffer` of an inner edge of their core reach a neighbour:
+        # route those through the 3 x 3 neighbourhood, every other point to its core only.
+        near = ok & (
+            ((x - ex[cix] < b) & (cix > 0))
+            | ((x >= ex[np.minimum(cix + 1, nx)] - b) & (cix < nx - 1))
+            | ((y - ey[ciy] < b) & (ciy > 0))
+            | ((y >= ey[np.minimum(ciy + 1, ny)] - b) & (ciy < ny - 1))
+        )
+        far = np.flatnonzero(ok & ~near)
+        sub = np.flatnonzero(near)
         d = np.array([-1, 0, 1])
 
         def axis_mask(v: npt.NDArray[np.float64], ci: npt.NDArray[np.int64],
@@ -335,14 +347,17 @@ class TileGrid:
             jc = np.clip(j, 0, n - 1)
             inside = (e[jc] - b <= v[:, None]) & (v[:, None] < e[jc + 1] + b)
             inside[:, 1] = True  # the core column/row, also on the closed top edge
-            return valid & inside & ok[:, None], jc
+            return valid & inside, jc
 
-        mx, jx = axis_mask(pts[:, 0], cix, ex, nx)
-        my, jy = axis_mask(pts[:, 1], ciy, ey, ny)
+        mx, jx = axis_mask(x[sub], cix[sub], ex, nx)
+        my, jy = axis_mask(y[sub], ciy[sub], ey, ny)
         pair = my[:, :, None] & mx[:, None, :]  # (n, dy, dx): tile ids ascend per point
-        p, ky, kx = np.nonzero(pair)
-        tile = jy[p, ky] * nx + jx[p, kx]
-        return p.astype(np.int64), tile.astype(np.int64), (ky == 1) & (kx == 1)
+        ps, ky, kx = np.nonzero(pair)
+        p = np.concatenate([far, sub[ps]])
+        tile = np.concatenate([core[far], jy[ps, ky] * nx + jx[ps, kx]])
+        is_core = np.concatenate([np.ones(len(far), dtype=bool), (ky == 1) & (kx == 1)])
+        order = np.argsort(p, kind="stable")  # one group per point: tiles stay ascending
+        return p[order].astype(np.int64), tile[order].astype(np.int64), is_core[order]
 
 
 def _as_points(xy: npt.ArrayLike) -> npt.NDArray[np.float64]:

@@ -43,6 +43,7 @@ __all__ = [
     "ingest",
     "IngestReport",
     "Runner",
+    "auto_tile_size",
 ]
 
 STAGE = "ingest"
@@ -62,8 +63,13 @@ class IngestParams:
 
     Parameters
     ----------
-    tile_size : float
-        Side of a tile's core, metres (default 50).
+    tile_size : float or None
+        Side of a tile's core, metres. None (the default, ``--tile-size auto``) picks the
+        side from the inputs' extent and point count so that an average tile holds about
+        ``tile_points`` points (a multiple of 5 m, at least 5 m): the reduce phase holds
+        one tile in memory, so this keeps its memory independent of the scan's size.
+    tile_points : int
+        Target points per tile for the automatic tile size (default 2 000 000).
     buffer : float
         Width of the ring of neighbours' points copied into each tile, metres (default 2).
     voxel : float or None
@@ -76,12 +82,13 @@ class IngestParams:
         Records per map unit (sets the map phase's memory: about 150 bytes per record).
     """
 
-    tile_size: float = 50.0
+    tile_size: float | None = None
     buffer: float = 2.0
     voxel: float | None = None
     bbox: tuple[float, float, float, float] | None = None
     tiles: tuple[int, ...] | None = None
     chunk_size: int = 1_000_000
+    tile_points: int = 2_000_000
 
     def __post_init__(self) -> None:
         def bad(name: str, rule: str, value: object) -> ConfigError:
@@ -89,10 +96,15 @@ class IngestParams:
                 f"The '{name}' parameter of ingest must be {rule}. Got {value!r} instead."
             )
 
-        if not (isinstance(self.tile_size, (int, float)) and math.isfinite(self.tile_size) and self.tile_size > 0):
-            raise bad("tile_size", "a float in the range (0.0, inf)", self.tile_size)
-        if not (isinstance(self.buffer, (int, float)) and math.isfinite(self.buffer) and 0 <= self.buffer < self.tile_size):
-            raise bad("buffer", f"a float in the range [0.0, tile_size={self.tile_size})", self.buffer)
+        if self.tile_size is not None and not (
+            isinstance(self.tile_size, (int, float)) and math.isfinite(self.tile_size) and self.tile_size > 0
+        ):
+            raise bad("tile_size", "a float in the range (0.0, inf) or auto", self.tile_size)
+        limit = math.inf if self.tile_size is None else self.tile_size
+        if not (isinstance(self.buffer, (int, float)) and math.isfinite(self.buffer) and 0 <= self.buffer < limit):
+            raise bad("buffer", f"a float in the range [0.0, tile_size={limit})", self.buffer)
+        if not (isinstance(self.tile_points, int) and self.tile_points > 0):
+            raise bad("tile_points", "an int in the range [1, inf)", self.tile_points)
         if self.voxel is not None and not (math.isfinite(self.voxel) and self.voxel > 0):
             raise bad("voxel", "a float in the range (0.0, inf) or None", self.voxel)
         if self.bbox is not None:
@@ -162,6 +174,26 @@ class IngestPlan:
         }
 
 
+def auto_tile_size(width: float, depth: float, n_points: int, *, tile_points: int, buffer: float) -> float:
+    """Tile side (metres) for which an average tile holds about ``tile_points`` points.
+
+    A multiple of 5 m, at least 5 m and more than twice the buffer.
+
+    Examples
+    --------
+    >>> auto_tile_size(140.0, 100.0, 10_000_000, tile_points=2_000_000, buffer=2.0)
+    55.0
+    >>> auto_tile_size(140.0, 100.0, 100_000_000, tile_points=2_000_000, buffer=2.0)
+    20.0
+    """
+    area = max(width, 1.0) * max(depth, 1.0)
+    side = math.sqrt(area * tile_points / max(n_points, 1))
+    side = max(5.0, 5.0 * math.ceil(side / 5.0))
+    while side <= 2 * buffer:
+        side += 5.0
+    return side
+
+
 def _source_bounds(info: SourceInfo, chunk_size: int) -> tuple[np.ndarray, np.ndarray]:
     if info.mins is not None and info.maxs is not None:
         return np.asarray(info.mins, float), np.asarray(info.maxs, float)
@@ -221,7 +253,13 @@ def plan_ingest(inputs: Sequence[str | Path], params: IngestParams) -> IngestPla
     hi = np.max([b[1] for b in bounds], axis=0)
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
         raise CorruptInputError(f"{sources[0].path}: no finite coordinates in the inputs")
-    grid = TileGrid.covering(lo[0], lo[1], hi[0], hi[1], tile_size=params.tile_size, buffer=params.buffer)
+    tile_size = params.tile_size
+    if tile_size is None:
+        tile_size = auto_tile_size(
+            float(hi[0] - lo[0]), float(hi[1] - lo[1]), sum(s.point_count for s in sources),
+            tile_points=params.tile_points, buffer=params.buffer,
+        )
+    grid = TileGrid.covering(lo[0], lo[1], hi[0], hi[1], tile_size=tile_size, buffer=params.buffer)
 
     las = [s for s in sources if s.scale is not None]
     scale = np.full(3, FLOAT_SOURCE_SCALE)
@@ -278,11 +316,16 @@ def plan_ingest(inputs: Sequence[str | Path], params: IngestParams) -> IngestPla
     return IngestPlan(**{**plan.__dict__, "params_hash": digest})
 
 
-def _dtype(fields: dict[str, list[Any]]) -> np.dtype:
-    spec = [("xyz", "<i4", (3,)), ("index", "<u8"), ("core", "?"), ("core_tile", "<i8")]
+def _empty_columns(fields: dict[str, list[Any]]) -> dict[str, np.ndarray]:
+    cols = {
+        "xyz": np.zeros((0, 3), np.int32),
+        "index": np.zeros(0, np.uint64),
+        "core": np.zeros(0, bool),
+        "core_tile": np.zeros(0, np.int64),
+    }
     for name, (dt, shape) in fields.items():
-        spec.append((name, dt, tuple(shape)) if shape else (name, dt))
-    return np.dtype(spec)
+        cols[name] = np.zeros((0, *shape), dtype=dt)
+    return cols
 
 
 def fragment_key(map_id: int, tile: int) -> str:
@@ -301,9 +344,10 @@ def map_chunk(url: str, unit: MapUnit, plan_attrs: dict[str, Any]) -> dict[str, 
     fields = plan_attrs["fields"]
     wanted = np.zeros(grid.n_tiles, dtype=bool)
     wanted[plan_attrs["ingest"]["tiles"]] = True
-    dtype = _dtype(fields)
-    parts: dict[int, list[np.ndarray]] = {}
+    parts: dict[int, list[dict[str, np.ndarray]]] = {}
+    n_dropped = 0
     for block in read_blocks(unit.path, chunk_size=unit.stop - unit.start, start=unit.start, stop=unit.stop):
+        n_dropped += block.n_dropped
         if not len(block.xyz):
             continue
         point, tile, is_core = grid.route(block.xyz, outside="flag")
@@ -314,28 +358,29 @@ def map_chunk(url: str, unit: MapUnit, plan_attrs: dict[str, Any]) -> dict[str, 
         core_of_point = np.empty(len(block.xyz), dtype=np.int64)
         core_of_point[point[is_core]] = tile[is_core]
         keep = wanted[tile]
-        point, tile, is_core = point[keep], tile[keep], is_core[keep]
-        core_tile = core_of_point[point]
-        rec = np.zeros(len(point), dtype=dtype)
-        rec["xyz"] = np.round((block.xyz[point] - offset) / scale).astype(np.int32)
-        rec["index"] = block.index[point] + np.uint64(unit.base)
-        rec["core"] = is_core
-        rec["core_tile"] = core_tile
-        for name in fields:
+        order = np.argsort(tile[keep], kind="stable")
+        point, tile, is_core = point[keep][order], tile[keep][order], is_core[keep][order]
+        cols = {
+            "xyz": np.round((block.xyz[point] - offset) / scale).astype(np.int32),
+            "index": block.index[point] + np.uint64(unit.base),
+            "core": is_core,
+            "core_tile": core_of_point[point],
+        }
+        for name, (dt, shape) in fields.items():
             src = block.extra.get(name[6:]) if name.startswith("extra.") else getattr(block, name)
-            if src is not None:
-                rec[name] = np.asarray(src)[point]
-        order = np.argsort(tile, kind="stable")
-        tile, rec = tile[order], rec[order]
+            cols[name] = (np.asarray(src)[point].astype(dt, copy=False) if src is not None
+                          else np.zeros((len(point), *shape), dtype=dt))
         cuts = np.flatnonzero(np.r_[True, tile[1:] != tile[:-1], True])
         for a, b in zip(cuts[:-1], cuts[1:], strict=True):
-            parts.setdefault(int(tile[a]), []).append(rec[a:b])
+            parts.setdefault(int(tile[a]), []).append({k: v[a:b] for k, v in cols.items()})
     counts: dict[str, int] = {}
     for t, pieces in parts.items():
-        table = np.concatenate(pieces)
-        store.write_fragment(fragment_key(unit.map_id, t), table)
-        counts[str(t)] = len(table)
-    store.record(MAP_STAGE, str(unit.map_id), {"params_hash": plan_attrs["ingest"]["params_hash"], "tiles": counts})
+        columns = {k: np.concatenate([p[k] for p in pieces]) for k in pieces[0]}
+        store.write_fragment(fragment_key(unit.map_id, t), columns)
+        counts[str(t)] = len(columns["index"])
+    store.record(MAP_STAGE, str(unit.map_id), {
+        "params_hash": plan_attrs["ingest"]["params_hash"], "tiles": counts, "n_dropped": n_dropped,
+    })
     return counts
 
 
@@ -367,38 +412,39 @@ def reduce_tile(url: str, tile: int, keys: Sequence[str], plan_attrs: dict[str, 
     scale = np.asarray(plan_attrs["coords"]["scale"])
     grid = TileGrid.from_dict(plan_attrs["grid"])
     params = plan_attrs["ingest"]["params"]
-    pieces = [store.read_fragment(k) for k in keys]
-    table = np.concatenate(pieces) if pieces else np.zeros(0, dtype=_dtype(fields))
-    # Fragments arrive in map order; sort by original index first so the result never
-    # depends on which fragment came first, then spatially.
-    table = table[np.argsort(table["index"], kind="stable")]
+    pieces = [store.read_fragment(k) for k in keys] or [_empty_columns(fields)]
+    cols = {k: np.concatenate([p[k] for p in pieces]) for k in pieces[0]}
+    # Fragments arrive in map order; order by original index first so the result never
+    # depends on which fragment came first, then spatially: one gather at the end.
+    order = np.argsort(cols["index"], kind="stable")
     arrays: dict[str, np.ndarray] = {}
-    if params.get("voxel") and len(table):
+    if params.get("voxel") and len(order):
         keep, rep = _voxel_representatives(
-            table["xyz"], table["index"], table["core_tile"], scale=scale, voxel=params["voxel"]
+            cols["xyz"][order], cols["index"][order], cols["core_tile"][order],
+            scale=scale, voxel=params["voxel"],
         )
-        dropped = table["core"] & ~keep
-        arrays["voxel_dropped"] = table["index"][dropped]
-        arrays["voxel_representative"] = table["index"][rep[dropped]]
-        table = table[keep]
-    if len(table):
+        dropped = cols["core"][order] & ~keep
+        arrays["voxel_dropped"] = cols["index"][order][dropped]
+        arrays["voxel_representative"] = cols["index"][order][rep[dropped]]
+        order = order[keep]
+    if len(order):
+        xyz = cols["xyz"][order]
         x0, y0, _, _ = grid.buffered_bounds(tile)
         cell = max(1.0, round(0.01 / float(scale.min())))  # 1 cm Morton cells
         origin = np.array([(x0 - plan_attrs["coords"]["offset"][0]) / scale[0],
                            (y0 - plan_attrs["coords"]["offset"][1]) / scale[1],
-                           float(table["xyz"][:, 2].min())])
-        table = table[morton_order(table["xyz"].astype(np.float64), origin=origin, cell=cell)]
-    arrays.update({"xyz": table["xyz"], "index": table["index"], "core": table["core"]})
-    for name in fields:
-        arrays[name] = table[name]
+                           float(xyz[:, 2].min())])
+        order = order[morton_order(xyz.astype(np.float64), origin=origin, cell=cell)]
+    for name in ["xyz", "index", "core", *fields]:
+        arrays[name] = cols[name][order]
     store.write_unit(f"tiles/{tile}", arrays)
     store.record(STAGE, str(tile), {
         "params_hash": plan_attrs["ingest"]["params_hash"],
-        "n_points": int(len(table)),
-        "n_core": int(table["core"].sum()),
+        "n_points": int(len(order)),
+        "n_core": int(arrays["core"].sum()),
     })
     store.delete_fragments(keys)
-    return int(len(table))
+    return int(len(order))
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -4,7 +4,7 @@ Layout (``docs/store.md`` is the reference)::
 
     <store>/zarr.json              root attrs: schema_version, sources, grid, coords, ingest
     <store>/tiles/<tile>/          one group per tile: xyz, index, core, ... (whole chunks)
-    <store>/fragments/<key>.npy    map-phase output (plain .npy), deleted once its tile is recorded
+    <store>/fragments/<key>.npy    map-phase output (plain .npz), deleted once its tile is recorded
     <store>/records/<stage>/<unit> completion records: one group per finished unit
 
 Completion records are written by the task that made the unit, after its data, as one
@@ -159,29 +159,30 @@ class RunStore:
         fs, root = fsspec.core.url_to_fs(self.url)
         return fs, root.rstrip("/") + "/fragments"
 
-    def write_fragment(self, key: str, table: npt.NDArray[np.void]) -> None:
-        """Store a structured array as ``fragments/<key>.npy``.
+    def write_fragment(self, key: str, columns: Mapping[str, npt.NDArray[Any]]) -> None:
+        """Store named columns as ``fragments/<key>.npz`` (uncompressed).
 
-        Fragments are scratch data between the map and the reduce phase: plain ``.npy``
+        Fragments are scratch data between the map and the reduce phase: plain ``.npz``
         objects beside the Zarr hierarchy (through fsspec, so any store URL works),
         written about 40x faster than a one-chunk Zarr array of the same bytes.
         """
         fs, base = self._fs()
-        with fs.open(f"{base}/{key}.npy", "wb") as f:
-            np.save(f, table, allow_pickle=False)
+        with fs.open(f"{base}/{key}.npz", "wb") as f:
+            np.savez(f, **columns)
 
-    def read_fragment(self, key: str) -> npt.NDArray[np.void]:
+    def read_fragment(self, key: str) -> dict[str, np.ndarray]:
         fs, base = self._fs()
-        with fs.open(f"{base}/{key}.npy", "rb") as f:
-            return np.load(io.BytesIO(f.read()), allow_pickle=False)
+        with fs.open(f"{base}/{key}.npz", "rb") as f:
+            with np.load(io.BytesIO(f.read()), allow_pickle=False) as z:
+                return {k: z[k] for k in z.files}
 
     def delete_fragments(self, keys: Iterable[str] | None = None) -> None:
         """Delete the given fragments (all when ``keys`` is None)."""
         fs, base = self._fs()
         if keys is None:
-            paths = fs.glob(f"{base}/*.npy")
+            paths = fs.glob(f"{base}/*.npz")
         else:
-            paths = [f"{base}/{k}.npy" for k in keys]
+            paths = [f"{base}/{k}.npz" for k in keys]
         for path in paths:
             if fs.exists(path):
                 fs.rm(path)
