@@ -71,7 +71,7 @@ def test_round_trip(scan_file, tmp_path):
         if len(xyz) > 100:
             step = np.linalg.norm(np.diff(xyz, axis=0), axis=1).mean()
             shuffled = xyz[np.random.default_rng(0).permutation(len(xyz))]
-            assert step < 0.2 * np.linalg.norm(np.diff(shuffled, axis=0), axis=1).mean()
+            assert step < 0.4 * np.linalg.norm(np.diff(shuffled, axis=0), axis=1).mean()
 
 
 def test_rerun_skips_everything(scan_file, tmp_path):
@@ -232,3 +232,34 @@ def test_different_crs_is_refused(tmp_path, capsys):
     _fails(capsys, ["ingest", str(a), str(b), "--store", str(tmp_path / "s"), "--scheduler", "sync",
                     "--no-progress"], "coordinate reference systems")
     assert not (tmp_path / "s").exists()
+
+
+def test_fsspec_url_store(scan_file):
+    url = "memory://hollowtree-test-store"
+    report = _ingest([scan_file], url)
+    store = RunStore.open(url)
+    assert len(store.records("ingest")) == report.n_tiles
+    n = laspy.read(scan_file).header.point_count
+    assert report.n_core_points == n
+
+
+def test_ply_with_nan_is_dropped_and_counted(tmp_path):
+    plyfile = pytest.importorskip("plyfile")
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(0, 20, (5000, 3))
+    pts[::100] = np.nan
+    v = np.zeros(len(pts), dtype=[("x", "f8"), ("y", "f8"), ("z", "f8")])
+    v["x"], v["y"], v["z"] = pts.T
+    path = tmp_path / "p.ply"
+    plyfile.PlyData([plyfile.PlyElement.describe(v, "vertex")]).write(str(path))
+    report = _ingest([path], tmp_path / "s")
+    assert report.n_dropped == 50
+    assert report.n_core_points == 4950
+    core = np.concatenate([t["index"][t["core"]] for t in _tiles(tmp_path / "s").values()])
+    assert not np.isin(np.arange(0, 5000, 100), core).any()
+    # float sources are kept at 0.1 mm
+    store = RunStore.open(tmp_path / "s")
+    scale, offset = np.array(store.attrs["coords"]["scale"]), np.array(store.attrs["coords"]["offset"])
+    for t in _tiles(tmp_path / "s").values():
+        xyz = t["xyz"] * scale + offset
+        assert np.abs(xyz - pts[t["index"].astype(np.int64)]).max() <= 0.00005 + 1e-9

@@ -48,6 +48,11 @@ __all__ = [
 
 STAGE = "ingest"
 MAP_STAGE = "ingest.map"
+#: A tile is reduced in SUBCELLS x SUBCELLS pieces (x-y), so memory follows the densest
+#: piece, not the tile: TLS density peaks sharply around each scanner station.
+SUBCELLS = 8
+#: Rows buffered before they are appended to a tile's arrays (about 60 MB).
+FLUSH_ROWS = 1_000_000
 #: Coordinate resolution for inputs that store floats (PLY, E57): 0.1 mm.
 FLOAT_SOURCE_SCALE = 0.0001
 _INT32_MAX = 2**31 - 1
@@ -316,16 +321,33 @@ def plan_ingest(inputs: Sequence[str | Path], params: IngestParams) -> IngestPla
     return IngestPlan(**{**plan.__dict__, "params_hash": digest})
 
 
-def _empty_columns(fields: dict[str, list[Any]]) -> dict[str, np.ndarray]:
-    cols = {
-        "xyz": np.zeros((0, 3), np.int32),
-        "index": np.zeros(0, np.uint64),
-        "core": np.zeros(0, bool),
-        "core_tile": np.zeros(0, np.int64),
-    }
+def _row_dtype(fields: dict[str, list[Any]]) -> np.dtype:
+    spec: list[Any] = [("xyz", "<i4", (3,)), ("index", "<u8"), ("core", "?"), ("core_tile", "<i8")]
     for name, (dt, shape) in fields.items():
-        cols[name] = np.zeros((0, *shape), dtype=dt)
-    return cols
+        spec.append((name, dt, tuple(shape)) if shape else (name, dt))
+    return np.dtype(spec)
+
+
+def _subcell_key(xyz_world: npt.NDArray[np.float64], offset: npt.NDArray[np.float64], width: float) -> npt.NDArray[np.int64]:
+    """Global key of the x-y sub-cell (side ``width``) of every point; ascending keys run
+    row by row (y, then x), so a tile's sub-cells come in a fixed order."""
+    gx = np.floor((xyz_world[:, 0] - offset[0]) / width).astype(np.int64) + (1 << 30)
+    gy = np.floor((xyz_world[:, 1] - offset[1]) / width).astype(np.int64) + (1 << 30)
+    return (gy << 31) | gx
+
+
+def subcell_width(tile_size: float, voxel: float | None) -> float:
+    """Side of the reduce phase's sub-cells: tile / 8, a whole number of voxels.
+
+    Examples
+    --------
+    >>> subcell_width(20.0, None), subcell_width(20.0, 0.3)
+    (2.5, 2.7)
+    """
+    width = tile_size / SUBCELLS
+    if voxel:
+        width = voxel * math.ceil(round(width / voxel, 9))
+    return round(width, 9)
 
 
 def fragment_key(map_id: int, tile: int) -> str:
@@ -344,7 +366,9 @@ def map_chunk(url: str, unit: MapUnit, plan_attrs: dict[str, Any]) -> dict[str, 
     fields = plan_attrs["fields"]
     wanted = np.zeros(grid.n_tiles, dtype=bool)
     wanted[plan_attrs["ingest"]["tiles"]] = True
-    parts: dict[int, list[dict[str, np.ndarray]]] = {}
+    width = subcell_width(grid.tile_size, plan_attrs["ingest"]["params"].get("voxel"))
+    dtype = _row_dtype(fields)
+    parts: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
     n_dropped = 0
     for block in read_blocks(unit.path, chunk_size=unit.stop - unit.start, start=unit.start, stop=unit.stop):
         n_dropped += block.n_dropped
@@ -357,27 +381,33 @@ def map_chunk(url: str, unit: MapUnit, plan_attrs: dict[str, Any]) -> dict[str, 
             )
         core_of_point = np.empty(len(block.xyz), dtype=np.int64)
         core_of_point[point[is_core]] = tile[is_core]
+        sub_of_point = _subcell_key(block.xyz, offset, width)
         keep = wanted[tile]
-        order = np.argsort(tile[keep], kind="stable")
-        point, tile, is_core = point[keep][order], tile[keep][order], is_core[keep][order]
-        cols = {
-            "xyz": np.round((block.xyz[point] - offset) / scale).astype(np.int32),
-            "index": block.index[point] + np.uint64(unit.base),
-            "core": is_core,
-            "core_tile": core_of_point[point],
-        }
-        for name, (dt, shape) in fields.items():
+        point, tile, is_core = point[keep], tile[keep], is_core[keep]
+        sub = sub_of_point[point]
+        order = np.lexsort((sub, tile))
+        point, tile, is_core, sub = point[order], tile[order], is_core[order], sub[order]
+        rows = np.empty(len(point), dtype=dtype)
+        rows["xyz"] = np.round((block.xyz[point] - offset) / scale).astype(np.int32)
+        rows["index"] = block.index[point] + np.uint64(unit.base)
+        rows["core"] = is_core
+        rows["core_tile"] = core_of_point[point]
+        for name, (_dt, shape) in fields.items():
             src = block.extra.get(name[6:]) if name.startswith("extra.") else getattr(block, name)
-            cols[name] = (np.asarray(src)[point].astype(dt, copy=False) if src is not None
-                          else np.zeros((len(point), *shape), dtype=dt))
+            rows[name] = np.asarray(src)[point] if src is not None else 0
         cuts = np.flatnonzero(np.r_[True, tile[1:] != tile[:-1], True])
         for a, b in zip(cuts[:-1], cuts[1:], strict=True):
-            parts.setdefault(int(tile[a]), []).append({k: v[a:b] for k, v in cols.items()})
+            parts.setdefault(int(tile[a]), []).append((rows[a:b], sub[a:b]))
     counts: dict[str, int] = {}
     for t, pieces in parts.items():
-        columns = {k: np.concatenate([p[k] for p in pieces]) for k in pieces[0]}
-        store.write_fragment(fragment_key(unit.map_id, t), columns)
-        counts[str(t)] = len(columns["index"])
+        rows = np.concatenate([p[0] for p in pieces])
+        sub = np.concatenate([p[1] for p in pieces])
+        if len(pieces) > 1:  # several blocks: restore the sub-cell order
+            order = np.argsort(sub, kind="stable")
+            rows, sub = rows[order], sub[order]
+        starts = np.flatnonzero(np.r_[True, sub[1:] != sub[:-1]])
+        store.write_fragment(fragment_key(unit.map_id, t), rows, np.stack([sub[starts], starts], axis=1))
+        counts[str(t)] = len(rows)
     store.record(MAP_STAGE, str(unit.map_id), {
         "params_hash": plan_attrs["ingest"]["params_hash"], "tiles": counts, "n_dropped": n_dropped,
     })
@@ -402,6 +432,15 @@ def _voxel_representatives(
     return keep, rep
 
 
+def _flush(writer: Any, pending: list[tuple[np.ndarray, dict[str, np.ndarray]]], names: list[str]) -> None:
+    if not pending:
+        return
+    arrays = {n: np.concatenate([r[n] for r, _ in pending]) for n in names}
+    for key in pending[0][1]:
+        arrays[key] = np.concatenate([e[key] for _, e in pending])
+    writer.append(arrays)
+
+
 def reduce_tile(url: str, tile: int, keys: Sequence[str], plan_attrs: dict[str, Any]) -> int:
     """Reduce task: gather a tile's fragments, Morton-sort, downsample, write, record.
 
@@ -412,39 +451,55 @@ def reduce_tile(url: str, tile: int, keys: Sequence[str], plan_attrs: dict[str, 
     scale = np.asarray(plan_attrs["coords"]["scale"])
     grid = TileGrid.from_dict(plan_attrs["grid"])
     params = plan_attrs["ingest"]["params"]
-    pieces = [store.read_fragment(k) for k in keys] or [_empty_columns(fields)]
-    cols = {k: np.concatenate([p[k] for p in pieces]) for k in pieces[0]}
-    # Fragments arrive in map order; order by original index first so the result never
-    # depends on which fragment came first, then spatially: one gather at the end.
-    order = np.argsort(cols["index"], kind="stable")
-    arrays: dict[str, np.ndarray] = {}
-    if params.get("voxel") and len(order):
-        keep, rep = _voxel_representatives(
-            cols["xyz"][order], cols["index"][order], cols["core_tile"][order],
-            scale=scale, voxel=params["voxel"],
-        )
-        dropped = cols["core"][order] & ~keep
-        arrays["voxel_dropped"] = cols["index"][order][dropped]
-        arrays["voxel_representative"] = cols["index"][order][rep[dropped]]
-        order = order[keep]
-    if len(order):
-        xyz = cols["xyz"][order]
-        x0, y0, _, _ = grid.buffered_bounds(tile)
-        cell = max(1.0, round(0.01 / float(scale.min())))  # 1 cm Morton cells
-        origin = np.array([(x0 - plan_attrs["coords"]["offset"][0]) / scale[0],
-                           (y0 - plan_attrs["coords"]["offset"][1]) / scale[1],
-                           float(xyz[:, 2].min())])
-        order = order[morton_order(xyz.astype(np.float64), origin=origin, cell=cell)]
-    for name in ["xyz", "index", "core", *fields]:
-        arrays[name] = cols[name][order]
-    store.write_unit(f"tiles/{tile}", arrays)
+    # Each fragment is sorted by sub-cell; gather one sub-cell at a time from all of them.
+    spans: dict[int, list[tuple[str, int, int]]] = {}
+    for k in keys:
+        groups = store.read_fragment_groups(k)
+        ends = np.r_[groups[1:, 1], np.iinfo(np.int64).max]
+        for (sub, a), b in zip(groups.tolist(), ends.tolist(), strict=True):
+            spans.setdefault(sub, []).append((k, a, b))
+    x0, y0, _, _ = grid.buffered_bounds(tile)
+    offset = np.asarray(plan_attrs["coords"]["offset"])
+    cell = max(1.0, round(0.01 / float(scale.min())))  # 1 cm Morton cells
+    names = ["xyz", "index", "core", *fields]
+    writer = store.unit_writer(f"tiles/{tile}")
+    n_points = n_core = n_pending = 0
+    pending: list[tuple[np.ndarray, dict[str, np.ndarray]]] = []
+    for sub in sorted(spans):
+        rows = np.concatenate([store.read_fragment_rows(k, a, b) for k, a, b in spans[sub]])
+        # order by original index first: the result never depends on fragment order
+        rows = rows[np.argsort(rows["index"], kind="stable")]
+        extra: dict[str, np.ndarray] = {}
+        if params.get("voxel"):
+            keep, rep = _voxel_representatives(
+                rows["xyz"], rows["index"], rows["core_tile"], scale=scale, voxel=params["voxel"]
+            )
+            dropped = rows["core"] & ~keep
+            extra["voxel_dropped"] = rows["index"][dropped]
+            extra["voxel_representative"] = rows["index"][rep[dropped]]
+            rows = rows[keep]
+        origin = np.array([(x0 - offset[0]) / scale[0], (y0 - offset[1]) / scale[1],
+                           float(rows["xyz"][:, 2].min())])
+        rows = rows[morton_order(rows["xyz"].astype(np.float64), origin=origin, cell=cell)]
+        pending.append((rows, extra))
+        n_pending += len(rows)
+        n_points += len(rows)
+        n_core += int(rows["core"].sum())
+        if n_pending >= FLUSH_ROWS:  # append in large pieces: each append costs a write
+            _flush(writer, pending, names)
+            pending, n_pending = [], 0
+    _flush(writer, pending, names)
+    empty = np.zeros(0, dtype=_row_dtype(fields))
+    writer.close({**{n: empty[n] for n in names},
+                  **({"voxel_dropped": np.zeros(0, np.uint64), "voxel_representative": np.zeros(0, np.uint64)}
+                     if params.get("voxel") else {})})
     store.record(STAGE, str(tile), {
         "params_hash": plan_attrs["ingest"]["params_hash"],
-        "n_points": int(len(order)),
-        "n_core": int(arrays["core"].sum()),
+        "n_points": n_points,
+        "n_core": n_core,
     })
     store.delete_fragments(keys)
-    return int(len(order))
+    return n_points
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -456,6 +511,7 @@ class IngestReport:
     n_points_in: int
     n_core_points: int
     n_buffer_points: int
+    n_dropped: int
     maps_run: int
     maps_skipped: int
     tiles_run: int
@@ -466,7 +522,8 @@ class IngestReport:
         return (
             f"{self.store}: {self.n_tiles} tiles, {self.n_core_points:,} core + "
             f"{self.n_buffer_points:,} buffer points from {self.n_points_in:,} input points "
-            f"in {self.seconds:.1f} s (map units run {self.maps_run}, skipped "
+            f"in {self.seconds:.1f} s; {self.n_dropped:,} records with non-finite coordinates "
+            f"dropped (map units run {self.maps_run}, skipped "
             f"{self.maps_skipped}; tiles run {self.tiles_run}, skipped {self.tiles_skipped})"
         )
 
@@ -547,6 +604,8 @@ def ingest(
     runner(reduce_tile, [(url, t, keys[t], attrs) for t in todo_tiles], "ingest: tiles")
     store.delete_fragments()
 
+    maps = store.records(MAP_STAGE)
+    n_dropped = sum(int(v.get("n_dropped", 0)) for v in maps.values() if v.get("params_hash") == h)
     recs = store.records(STAGE)
     n_core = sum(int(recs[str(t)]["n_core"]) for t in plan.tiles)
     n_all = sum(int(recs[str(t)]["n_points"]) for t in plan.tiles)
@@ -554,7 +613,7 @@ def ingest(
         "params_hash": h, "units": len(plan.tiles), "done": len(plan.tiles)}}})
     return IngestReport(
         store=url, n_tiles=len(plan.tiles), n_points_in=sum(s.point_count for s in plan.sources),
-        n_core_points=n_core, n_buffer_points=n_all - n_core,
+        n_core_points=n_core, n_buffer_points=n_all - n_core, n_dropped=n_dropped,
         maps_run=len(todo_units), maps_skipped=len(plan.units) - len(todo_units),
         tiles_run=len(todo_tiles), tiles_skipped=len(plan.tiles) - len(todo_tiles),
         seconds=time.perf_counter() - t0,
