@@ -126,7 +126,50 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
     g.add_argument("--no-progress", action="store_true", help="no progress bars")
     g.set_defaults(func=_cmd_ingest)
+
+    c = sub.add_parser(
+        "coarse",
+        help="coarse segments per tile (normals, Efficient RANSAC, DBSCAN), stitched across tiles",
+        description=(
+            "Run the paper's first stage on an ingested run store: PCA normals, Efficient "
+            "RANSAC primitives and DBSCAN per tile as Dask tasks, then join the tiles' "
+            "segments over their shared buffer points. Rerunning resumes: recorded tiles "
+            "are skipped."
+        ),
+    )
+    c.add_argument("store", help="run store made by `hollowtree ingest`")
+    c.add_argument("--epsilon", type=_float, default=0.03, help="RANSAC distance, metres (default 0.03)")
+    c.add_argument("--alpha", type=_float, default=20.0, help="RANSAC normal angle, degrees (default 20)")
+    c.add_argument("--cluster-epsilon", type=_float, default=0.15,
+                   help="RANSAC bitmap cell, metres (default 0.15)")
+    c.add_argument("--min-support", type=_positive_int, default=200,
+                   help="smallest primitive, points (default 200)")
+    c.add_argument("--eps", type=_float, help="DBSCAN radius, metres (default: 3 x point spacing)")
+    c.add_argument("--min-samples", type=_positive_int, default=10, help="DBSCAN core threshold")
+    c.add_argument("--seed", type=int, default=0)
+    c.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process")
+    c.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
+    c.add_argument("--no-progress", action="store_true", help="no progress bars")
+    c.set_defaults(func=_cmd_coarse)
     return parser
+
+
+def _cmd_coarse(args: argparse.Namespace) -> int:
+    from pipeline.coarse import CoarseParams, run_coarse
+    from pipeline.graph import task_runner
+    from primitives.ransac import RansacParams
+    from tiling.store import RunStore
+
+    RunStore.open(args.store)  # a missing store or another schema fails before any cluster starts
+    params = CoarseParams(
+        ransac=RansacParams(epsilon=args.epsilon, alpha_deg=args.alpha,
+                            cluster_epsilon=args.cluster_epsilon, min_support=args.min_support),
+        eps=args.eps, min_samples=args.min_samples, seed=args.seed,
+    )
+    with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
+        report = run_coarse(args.store, params, runner=run)
+    print(report.summary())
+    return 0
 
 
 def _tile_size(text: str) -> float | None:

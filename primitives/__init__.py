@@ -1,6 +1,35 @@
-"""Coarse segmentation kernels: normals, Efficient RANSAC, DBSCAN, stitching.
+"""Coarse-segmentation kernels (the paper's first stage): pure NumPy/SciPy.
 
-Not built yet: issue 4 builds them. Nothing here is importable beyond this docstring.
+- :func:`estimate_normals`: k-NN PCA normals and surface variation;
+- :func:`efficient_ransac`: Efficient RANSAC (Schnabel, Wahl and Klein 2007) for planes,
+  spheres, cylinders and cones (tori are not built yet);
+- :func:`dbscan_labels`, :func:`dbscan_segments`, :func:`default_eps`: exact DBSCAN
+  (scikit-learn's labels) and its per-primitive use;
+- :class:`UnionFind`, :func:`stitch_segments`, :func:`csr_by_segment`: joining tile-local
+  segments across tile borders.
+
+The per-tile Dask task and the stitching of a run store are in ``pipeline/coarse.py``.
 """
 
-__all__: list[str] = []
+from primitives.dbscan import dbscan_labels, dbscan_segments, default_eps
+from primitives.normals import NormalResult, estimate_normals
+from primitives.ransac import RansacParams, RansacResult, efficient_ransac
+from primitives.shapes import FailedFit, PrimitiveFit
+from primitives.stitch import StitchResult, UnionFind, csr_by_segment, stitch_segments
+
+__all__ = [
+    "FailedFit",
+    "NormalResult",
+    "PrimitiveFit",
+    "RansacParams",
+    "RansacResult",
+    "StitchResult",
+    "UnionFind",
+    "csr_by_segment",
+    "dbscan_labels",
+    "dbscan_segments",
+    "default_eps",
+    "efficient_ransac",
+    "estimate_normals",
+    "stitch_segments",
+]

@@ -77,7 +77,8 @@ def test_round_trip(scan_file, tmp_path):
 def test_rerun_skips_everything(scan_file, tmp_path):
     _ingest([scan_file], tmp_path / "s")
     again = _ingest([scan_file], tmp_path / "s")
-    assert again.tiles_run == 0 and again.maps_run == 0
+    assert again.tiles_run == 0
+    assert again.maps_run == 0
     assert again.tiles_skipped == again.n_tiles
 
 
@@ -87,7 +88,9 @@ def test_other_parameters_are_refused(scan_file, tmp_path, capsys):
                  "--buffer", "1", "--scheduler", "sync", "--no-progress"])
     err = capsys.readouterr().err
     assert code == 2
-    assert "tile_size" in err and "10" in err and "20" in err
+    assert "tile_size" in err
+    assert "10" in err
+    assert "20" in err
 
 
 def test_unknown_schema_version_is_refused(scan_file, tmp_path):

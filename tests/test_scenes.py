@@ -11,7 +11,14 @@ from embreex import mesh_construction, rtcore_scene
 
 from scenes.elements import arcade, minaret, portal
 from scenes.mesh import TriMesh
-from scenes.shapes import ArcPath, StraightPath, arch_outline, subdivide, triangulate_polygon, wall_panel
+from scenes.shapes import (
+    ArcPath,
+    StraightPath,
+    arch_outline,
+    subdivide,
+    triangulate_polygon,
+    wall_panel,
+)
 from scenes.sites import SITES, TEST_SCENES, UnknownSceneError, build_scene, scene_names
 from tiling.classes import ELEMENT_CLASSES, ClassId
 
@@ -65,8 +72,10 @@ def test_unknown_name_lists_known():
     with pytest.raises(UnknownSceneError) as info:
         build_scene("taj_mahal")
     msg = str(info.value)
-    assert "taj_mahal" in msg and all(n in msg for n in scene_names())
-    assert isinstance(info.value, KeyError) and isinstance(info.value, ValueError)
+    assert "taj_mahal" in msg
+    assert all(n in msg for n in scene_names())
+    assert isinstance(info.value, KeyError)
+    assert isinstance(info.value, ValueError)
 
 
 # --------------------------------------------------------------------------- counts
@@ -82,7 +91,8 @@ def test_site_counts_match_table1(sites, name):
 def test_test_scene_counts(name):
     s = build_scene(name, rng=5)
     assert s.element_counts() == {c: TEST_SCENES[name].expected_counts.get(c, 0) for c in ELEMENT_CLASSES}
-    assert 1 <= len(s.stations) and TEST_SCENES[name].default_stations <= len(s.stations)
+    assert 1 <= len(s.stations)
+    assert TEST_SCENES[name].default_stations <= len(s.stations)
     assert (s.face_class == ClassId.GROUND).any()
 
 
@@ -194,7 +204,8 @@ def test_curved_panel_is_watertight_and_on_the_circle():
     # face centroids stay within 3 mm of the two cylinders (or between them, on reveals)
     c = m.vertices[m.faces].mean(axis=1)
     r = np.hypot(c[:, 0], c[:, 1])
-    assert r.min() > 9.7 - 0.003 and r.max() < 10.3 + 0.003
+    assert r.min() > 9.7 - 0.003
+    assert r.max() < 10.3 + 0.003
 
 
 # --------------------------------------------------------------------------- openings
@@ -236,7 +247,9 @@ def test_window_hole_and_portal_pass():
     sc = _caster(mesh.vertices, mesh.faces)
     prim, _ = _cast(sc, np.array([[5.0, -2.0, 2.5], [5.0, -2.0, 1.0], [2.0, -2.0, 2.5]]),
                     np.tile([0.0, 1.0, 0.0], (3, 1)))
-    assert prim[0] == -1 and prim[1] >= 0 and prim[2] >= 0
+    assert prim[0] == -1
+    assert prim[1] >= 0
+    assert prim[2] >= 0
     p = portal(path, u0=1.0, u1=9.0, span=5.0, spring=4.0, height=9.0)
     _assert_openings(p, np.array([[5.0, 0.0, 3.0]]), np.array([0.0, 1.0, 0.0]), up=4.0, depth=3.0)
 
@@ -331,7 +344,8 @@ def test_dome_scene_has_a_station_under_the_dome():
     c = s.vertices[np.unique(s.faces[dome])][:, :2].mean(axis=0)
     k = TEST_SCENES["dome"].default_stations
     under = np.linalg.norm(s.stations[:k, :2] - c, axis=1) < 1.0
-    assert under.any() and (~under).sum() >= 2
+    assert under.any()
+    assert (~under).sum() >= 2
     sc = _caster(s.vertices, s.faces)
     prim, _ = _cast(sc, s.stations[np.flatnonzero(under)[0]], np.array([[0.0, 0.0, 1.0]]))
     assert s.face_class[prim[0]] == ClassId.DOME  # straight up: the dome's inner surface

@@ -392,7 +392,7 @@ def map_chunk(url: str, unit: MapUnit, plan_attrs: dict[str, Any]) -> dict[str, 
         rows["index"] = block.index[point] + np.uint64(unit.base)
         rows["core"] = is_core
         rows["core_tile"] = core_of_point[point]
-        for name, (_dt, shape) in fields.items():
+        for name in fields:
             src = block.extra.get(name[6:]) if name.startswith("extra.") else getattr(block, name)
             rows[name] = np.asarray(src)[point] if src is not None else 0
         cuts = np.flatnonzero(np.r_[True, tile[1:] != tile[:-1], True])

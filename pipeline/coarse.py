@@ -1,0 +1,411 @@
+"""The coarse stage: per-tile normals, Efficient RANSAC and DBSCAN, then stitching.
+
+Orchestration only: the numerical work is in ``primitives/`` (pure kernels); this module
+reads a tile from the run store, calls the kernels, writes the tile's results and its
+completion record (a Dask task per tile, through the ``runner`` of ``pipeline/graph.py``),
+and after all tiles joins the tiles' segments across their shared buffer points.
+
+Store layout written here (``docs/store.md``)::
+
+    coarse/tiles/<tile>/primitive   uint8 (n,)   0 none, 1 plane, 2 sphere, 3 cylinder, 4 cone
+    coarse/tiles/<tile>/segment     int32 (n,)   tile-local segment, 0 = unsegmented
+    coarse/tiles/<tile>/global      uint64 (n,)  global segment of core rows (0 elsewhere)
+    coarse/tables/<tile>.parquet                 the tile's segments
+    coarse/segments.parquet                      the global segments
+    coarse/csr/indices, coarse/csr/offsets       original indices grouped by global segment
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import tempfile
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from primitives.dbscan import dbscan_segments, default_eps
+from primitives.normals import estimate_normals
+from primitives.ransac import RansacParams, efficient_ransac
+from primitives.stitch import UnionFind
+from tiling.errors import ConfigError, PipelineError
+from tiling.grid import TileGrid
+from tiling.store import RunStore
+
+__all__ = ["CoarseParams", "PRIMITIVE_CODES", "coarse_tile", "run_coarse", "CoarseReport"]
+
+STAGE = "coarse"
+#: Primitive type codes stored per point (0 = no primitive).
+PRIMITIVE_CODES = {"plane": 1, "sphere": 2, "cylinder": 3, "cone": 4, "torus": 5}
+
+
+@dataclass(frozen=True, kw_only=True)
+class CoarseParams:
+    """Parameters of the coarse stage.
+
+    Parameters
+    ----------
+    k : int
+        Neighbours of the PCA normals.
+    ransac : RansacParams
+        Efficient RANSAC settings (epsilon, alpha, cluster epsilon, minimum support, ...).
+    eps : float or None
+        DBSCAN radius (metres); None = 3 x the median 8-NN spacing of a sample of the
+        scan, computed once for the whole store so every tile uses the same value.
+    min_samples : int
+        DBSCAN core threshold.
+    seed : int
+        Base seed; tile t uses ``SeedSequence([seed, t])``.
+    angle_tol_deg, distance_tol, radius_tol : float
+        When two tiles' segments that share points are the same primitive: axes/normals
+        within ``angle_tol_deg``, positions within ``distance_tol`` metres, radii within
+        ``radius_tol`` (relative).
+    """
+
+    k: int = 16
+    ransac: RansacParams = field(default_factory=RansacParams)
+    eps: float | None = None
+    min_samples: int = 10
+    seed: int = 0
+    angle_tol_deg: float = 10.0
+    distance_tol: float = 0.15
+    radius_tol: float = 0.15
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.k, int) and self.k >= 3):
+            raise ConfigError(f"The 'k' parameter of coarse must be an int in the range [3, inf). Got {self.k!r} instead.")
+        if self.eps is not None and not (math.isfinite(self.eps) and self.eps > 0):
+            raise ConfigError(f"The 'eps' parameter of coarse must be a float in the range (0.0, inf). Got {self.eps!r} instead.")
+        if not (isinstance(self.min_samples, int) and self.min_samples >= 1):
+            raise ConfigError(
+                f"The 'min_samples' parameter of coarse must be an int in the range [1, inf). Got {self.min_samples!r} instead."
+            )
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["ransac"] = self.ransac.to_dict()
+        return d
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> CoarseParams:
+        d = dict(data)
+        d["ransac"] = RansacParams.from_dict(d["ransac"])
+        return cls(**d)
+
+
+def _tile_points(store: RunStore, tile: int, scale: np.ndarray) -> dict[str, np.ndarray]:
+    d = store.read_unit(f"tiles/{tile}", ["xyz", "core", "index"])
+    # Store-local metres: consistent across tiles, so primitive parameters compare.
+    d["local"] = d["xyz"].astype(np.float64) * scale
+    return d
+
+
+def coarse_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, int]:
+    """Dask task: segment one tile; write its arrays and table, then its record."""
+    store = RunStore.open(url, mode="a")
+    params = CoarseParams.from_dict(cfg["params"])
+    scale = np.asarray(store.attrs["coords"]["scale"])
+    offset = np.asarray(store.attrs["coords"]["offset"])
+    d = _tile_points(store, tile, scale)
+    xyz, n = d["local"], len(d["local"])
+    labels = np.full(n, -1, dtype=np.int64)
+    fits: tuple[Any, ...] = ()
+    n_invalid = 0
+    if n:
+        nr = estimate_normals(xyz, k=params.k)
+        valid = nr.valid
+        n_invalid = int((~valid).sum())
+        rng = np.random.default_rng(np.random.SeedSequence([params.seed, tile]))
+        if valid.sum() >= params.ransac.min_support:
+            res = efficient_ransac(xyz[valid], nr.normals[valid], **params.ransac.to_dict(), rng=rng)
+            labels[valid] = res.labels
+            fits = res.primitives
+    segment = dbscan_segments(xyz, labels, eps=cfg["eps"], min_samples=params.min_samples) if n else np.zeros(0, np.int64)
+    primitive = np.zeros(n, dtype=np.uint8)
+    has = segment > 0
+    kinds = np.array([PRIMITIVE_CODES[f.kind] for f in fits] + [0], dtype=np.uint8)
+    primitive[has] = kinds[labels[has]]
+    store.write_unit(f"coarse/tiles/{tile}", {
+        "primitive": primitive,
+        "segment": segment.astype(np.int32),
+    })
+    # One row per local segment: its primitive, point counts, lowest core index, bbox.
+    rows: dict[str, list[Any]] = {k: [] for k in (
+        "tile", "segment", "kind", "params", "rms", "n_points", "n_core", "min_index",
+        "xmin", "ymin", "zmin", "xmax", "ymax", "zmax")}
+    if has.any():
+        order = np.argsort(segment, kind="stable")
+        seg_sorted = segment[order]
+        starts = np.flatnonzero(np.r_[True, seg_sorted[1:] != seg_sorted[:-1]])
+        ends = np.r_[starts[1:], len(order)]
+        for a, b in zip(starts, ends, strict=True):
+            sid = int(seg_sorted[a])
+            if sid <= 0:
+                continue
+            rows_idx = order[a:b]
+            fit = fits[int(labels[rows_idx[0]])]
+            core = d["core"][rows_idx]
+            world = xyz[rows_idx] + offset
+            rows["tile"].append(tile)
+            rows["segment"].append(sid)
+            rows["kind"].append(fit.kind)
+            rows["params"].append(json.dumps(list(fit.params)))
+            rows["rms"].append(float(fit.rms))
+            rows["n_points"].append(int(len(rows_idx)))
+            rows["n_core"].append(int(core.sum()))
+            rows["min_index"].append(int(d["index"][rows_idx][core].min()) if core.any() else -1)
+            for j, key in enumerate(("xmin", "ymin", "zmin")):
+                rows[key].append(float(world[:, j].min()))
+            for j, key in enumerate(("xmax", "ymax", "zmax")):
+                rows[key].append(float(world[:, j].max()))
+    _write_table(store, f"coarse/tables/{tile}.parquet", pa.table(rows, schema=_TABLE_SCHEMA))
+    info = {
+        "params_hash": cfg["params_hash"],
+        "n_points": n,
+        "n_segments": int(len(rows["segment"])),
+        "n_unsegmented": int((segment == 0).sum()),
+        "n_no_normal": n_invalid,
+    }
+    store.record(STAGE, str(tile), info)
+    return info
+
+
+_TABLE_SCHEMA = pa.schema([
+    ("tile", pa.int64()), ("segment", pa.int64()), ("kind", pa.string()), ("params", pa.string()),
+    ("rms", pa.float64()), ("n_points", pa.int64()), ("n_core", pa.int64()), ("min_index", pa.int64()),
+    ("xmin", pa.float64()), ("ymin", pa.float64()), ("zmin", pa.float64()),
+    ("xmax", pa.float64()), ("ymax", pa.float64()), ("zmax", pa.float64()),
+])
+
+
+def _fs(store: RunStore) -> tuple[Any, str]:
+    import fsspec
+
+    fs, root = fsspec.core.url_to_fs(store.url)
+    return fs, root.rstrip("/")
+
+
+def _write_table(store: RunStore, rel: str, table: pa.Table) -> None:
+    fs, root = _fs(store)
+    path = f"{root}/{rel}"
+    fs.makedirs(path.rsplit("/", 1)[0], exist_ok=True)
+    with fs.open(path, "wb") as f:
+        pq.write_table(table, f)
+
+
+def _read_table(store: RunStore, rel: str) -> pa.Table:
+    fs, root = _fs(store)
+    with fs.open(f"{root}/{rel}", "rb") as f:
+        return pq.read_table(f)
+
+
+def _same_primitive(a: dict[str, Any], b: dict[str, Any], p: CoarseParams) -> bool:
+    """Whether two tiles' fits describe the same primitive (within the tolerances)."""
+    if a["kind"] != b["kind"]:
+        return False
+    pa_, pb = np.asarray(json.loads(a["params"])), np.asarray(json.loads(b["params"]))
+    cos_tol = math.cos(math.radians(p.angle_tol_deg))
+    if a["kind"] == "plane":
+        if abs(float(pa_[:3] @ pb[:3])) < cos_tol:
+            return False
+        sign = 1.0 if float(pa_[:3] @ pb[:3]) > 0 else -1.0
+        return abs(pa_[3] - sign * pb[3]) <= p.distance_tol
+    if a["kind"] == "sphere":
+        return (np.linalg.norm(pa_[:3] - pb[:3]) <= p.distance_tol + p.radius_tol * pa_[3]
+                and abs(pa_[3] - pb[3]) <= p.radius_tol * max(pa_[3], pb[3]))
+    if a["kind"] == "cylinder":
+        axis_a, axis_b = pa_[3:6], pb[3:6]
+        if abs(float(axis_a @ axis_b)) < cos_tol:
+            return False
+        d = pb[:3] - pa_[:3]
+        off_axis = np.linalg.norm(d - (d @ axis_a) * axis_a)
+        return off_axis <= p.distance_tol + p.radius_tol * pa_[6] and abs(pa_[6] - pb[6]) <= p.radius_tol * max(pa_[6], pb[6])
+    if a["kind"] == "cone":
+        if abs(float(pa_[3:6] @ pb[3:6])) < cos_tol:
+            return False
+        return np.linalg.norm(pa_[:3] - pb[:3]) <= 5 * p.distance_tol and abs(pa_[6] - pb[6]) <= math.radians(p.angle_tol_deg)
+    return False
+
+
+@dataclass(frozen=True, kw_only=True)
+class CoarseReport:
+    store: str
+    n_tiles: int
+    tiles_run: int
+    tiles_skipped: int
+    n_tile_segments: int
+    n_segments: int
+    n_unsegmented: int
+    n_no_normal: int
+    seconds: float
+
+    def summary(self) -> str:
+        return (
+            f"{self.store}: {self.n_segments:,} global segments from {self.n_tile_segments:,} "
+            f"tile segments in {self.n_tiles} tiles ({self.tiles_run} run, {self.tiles_skipped} "
+            f"skipped); {self.n_unsegmented:,} point copies unsegmented, {self.n_no_normal:,} "
+            f"without a normal; {self.seconds:.1f} s"
+        )
+
+
+def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tuple[int, int]:
+    """Join tile segments over shared buffer points; write global ids, table and CSR."""
+    scale = np.asarray(store.attrs["coords"]["scale"])
+    offset = np.asarray(store.attrs["coords"]["offset"])
+    grid = TileGrid.from_dict(store.attrs["grid"])
+    tables = [_read_table(store, f"coarse/tables/{t}.parquet").to_pylist() for t in tiles]
+    keys = [(r["tile"], r["segment"]) for tab in tables for r in tab]
+    info = {k: r for k, r in zip(keys, (r for tab in tables for r in tab), strict=True)}
+    key_id = {k: i for i, k in enumerate(keys)}
+    uf = UnionFind(len(keys))
+    # Rows that another tile also holds: buffer rows and core rows near a core edge.
+    border_index, border_key = [], []
+    for t in tiles:
+        d = store.read_unit(f"tiles/{t}", ["xyz", "core", "index"])
+        seg = store.read_unit(f"coarse/tiles/{t}", ["segment"])["segment"]
+        x0, y0, x1, y1 = grid.core_bounds(t)
+        world = d["xyz"][:, :2] * scale[:2] + offset[:2]
+        b = grid.buffer
+        near = (~d["core"]) | (world[:, 0] < x0 + b) | (world[:, 0] >= x1 - b) | (world[:, 1] < y0 + b) | (world[:, 1] >= y1 - b)
+        near &= seg > 0
+        border_index.append(d["index"][near].astype(np.int64))
+        border_key.append(np.array([key_id[(t, int(s))] for s in seg[near]], dtype=np.int64))
+    if border_index:
+        idx = np.concatenate(border_index)
+        kid = np.concatenate(border_key)
+        order = np.lexsort((kid, idx))
+        idx, kid = idx[order], kid[order]
+        same = idx[1:] == idx[:-1]
+        a, c = kid[:-1][same], kid[1:][same]
+        pairs = np.stack([np.minimum(a, c), np.maximum(a, c)], axis=1)
+        pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+        if len(pairs):
+            uniq, counts = np.unique(pairs, axis=0, return_counts=True)
+            ok = [bool(n >= 3 and _same_primitive(info[keys[i]], info[keys[j]], params))
+                  for (i, j), n in zip(uniq.tolist(), counts.tolist(), strict=True)]
+            sel = uniq[np.asarray(ok, dtype=bool)]
+            if len(sel):
+                uf.union_pairs(sel[:, 0], sel[:, 1])
+    roots = uf.find(np.arange(len(keys))) if keys else np.zeros(0, np.int64)
+    # Global ids 1..G in order of each global segment's lowest core index.
+    n_core = np.array([info[k]["n_core"] for k in keys], dtype=np.int64)
+    min_index = np.array([info[k]["min_index"] if info[k]["n_core"] else np.iinfo(np.int64).max
+                          for k in keys], dtype=np.int64)
+    root_min: dict[int, int] = {}
+    root_core: dict[int, int] = {}
+    for r, m, c in zip(roots.tolist(), min_index.tolist(), n_core.tolist(), strict=True):
+        root_min[r] = min(root_min.get(r, m), m)
+        root_core[r] = root_core.get(r, 0) + c
+    live = sorted((m, r) for r, m in root_min.items() if root_core[r] > 0)
+    gid_of_root = {r: g + 1 for g, (_, r) in enumerate(live)}
+    key_global = np.array([gid_of_root.get(r, 0) for r in roots.tolist()], dtype=np.int64)
+    n_segments = len(live)
+
+    # Per tile: the global id of every core row; counts per global segment for the CSR.
+    counts = np.zeros(n_segments + 1, dtype=np.int64)
+    for t in tiles:
+        seg = store.read_unit(f"coarse/tiles/{t}", ["segment"])["segment"]
+        core = store.read_unit(f"tiles/{t}", ["core"])["core"]
+        lookup = np.zeros(int(seg.max(initial=0)) + 1, dtype=np.int64)
+        for (tt, s), g in zip(keys, key_global.tolist(), strict=True):
+            if tt == t:
+                lookup[s] = g
+        glob = np.where(core, lookup[seg], 0).astype(np.uint64)
+        store.write_unit(f"coarse/tiles/{t}", {**store.read_unit(f"coarse/tiles/{t}"), "global": glob})
+        counts += np.bincount(glob.astype(np.int64), minlength=n_segments + 1)
+    # CSR of original indices by global segment, filled through a disk-backed scratch
+    # array so the driver never holds the scan in memory.
+    offsets = np.r_[0, np.cumsum(counts[1:])].astype(np.int64)
+    total = int(offsets[-1])
+    with tempfile.TemporaryFile() as scratch:
+        buf = np.memmap(scratch, dtype=np.uint64, mode="w+", shape=(max(total, 1),))
+        cursor = offsets[:-1].copy()
+        for t in tiles:
+            glob = store.read_unit(f"coarse/tiles/{t}", ["global"])["global"].astype(np.int64)
+            index = store.read_unit(f"tiles/{t}", ["index"])["index"]
+            sel = glob > 0
+            if not sel.any():
+                continue
+            g, ix = glob[sel], index[sel]
+            order = np.argsort(g, kind="stable")
+            g, ix = g[order], ix[order]
+            starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
+            ends = np.r_[starts[1:], len(g)]
+            for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
+                gg = int(g[a]) - 1
+                buf[cursor[gg]:cursor[gg] + (b - a)] = ix[a:b]
+                cursor[gg] += b - a
+        buf.flush()
+        store.write_unit("coarse/csr", {"indices": np.asarray(buf[:total]), "offsets": offsets})
+        del buf
+    # The global table: one row per global segment (the primitive of its largest member).
+    members: dict[int, list[dict[str, Any]]] = {}
+    for k, g in zip(keys, key_global.tolist(), strict=True):
+        if g:
+            members.setdefault(g, []).append(info[k])
+    out: dict[str, list[Any]] = {c: [] for c in (
+        "segment", "kind", "params", "rms", "n_points", "n_tiles", "xmin", "ymin", "zmin", "xmax", "ymax", "zmax")}
+    for g in range(1, n_segments + 1):
+        ms = members[g]
+        big = max(ms, key=lambda r: r["n_points"])
+        out["segment"].append(g)
+        out["kind"].append(big["kind"])
+        out["params"].append(big["params"])
+        out["rms"].append(big["rms"])
+        out["n_points"].append(int(counts[g]))
+        out["n_tiles"].append(len({m["tile"] for m in ms}))
+        for c in ("xmin", "ymin", "zmin"):
+            out[c].append(min(m[c] for m in ms))
+        for c in ("xmax", "ymax", "zmax"):
+            out[c].append(max(m[c] for m in ms))
+    _write_table(store, "coarse/segments.parquet", pa.table(out))
+    return n_segments, len(keys)
+
+
+def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
+    """Run the coarse stage on an ingested store (resumable per tile), then stitch."""
+    t0 = time.perf_counter()
+    store = RunStore.open(url, mode="a")
+    attrs = store.attrs
+    tiles = [int(t) for t in attrs.get("ingest", {}).get("tiles", [])]
+    done_ingest = store.records("ingest")
+    missing = [t for t in tiles if str(t) not in done_ingest]
+    if not tiles or missing:
+        raise PipelineError(
+            f"store {url}: ingest is not complete ({len(missing)} of {len(tiles)} tiles missing); "
+            "rerun `hollowtree ingest` first"
+        )
+    eps = params.eps
+    if eps is None:
+        scale = np.asarray(attrs["coords"]["scale"])
+        biggest = max(tiles, key=lambda t: int(done_ingest[str(t)].get("n_points", 0)))
+        xyz = _tile_points(store, biggest, scale)["local"]
+        sample = xyz[np.random.default_rng(params.seed).permutation(len(xyz))[:200_000]]
+        eps = default_eps(sample) if len(sample) > 10 else 0.1
+    cfg = {"params": params.to_dict(), "eps": float(eps)}
+    h = hashlib.sha256(json.dumps([cfg, attrs["ingest"]["params_hash"]], sort_keys=True).encode()).hexdigest()[:16]
+    cfg["params_hash"] = h
+    stages = attrs.get("stages", {})
+    if stages.get(STAGE, {}).get("params_hash") not in (None, h):
+        store.clear_records(STAGE)  # other parameters: every tile is redone
+    done = {k for k, v in store.records(STAGE).items() if v.get("params_hash") == h}
+    todo = [t for t in tiles if str(t) not in done]
+    runner(coarse_tile, [(url, t, cfg) for t in todo], "coarse: tiles")
+    n_segments, n_keys = _stitch(store, tiles, params)
+    recs = store.records(STAGE)
+    store.update_attrs({"stages": {**store.attrs.get("stages", {}), STAGE: {
+        "params_hash": h, "units": len(tiles), "done": len(tiles), "eps": float(eps),
+        "params": params.to_dict(), "n_segments": n_segments}}})
+    return CoarseReport(
+        store=url, n_tiles=len(tiles), tiles_run=len(todo), tiles_skipped=len(tiles) - len(todo),
+        n_tile_segments=n_keys, n_segments=n_segments,
+        n_unsegmented=sum(int(recs[str(t)]["n_unsegmented"]) for t in tiles),
+        n_no_normal=sum(int(recs[str(t)]["n_no_normal"]) for t in tiles),
+        seconds=time.perf_counter() - t0,
+    )

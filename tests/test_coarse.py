@@ -1,0 +1,111 @@
+"""The coarse stage on the run store: tile-size invariance, stitching, CSR, resume."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import laspy
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from sklearn.metrics import adjusted_rand_score
+
+from pipeline.cli import main
+from pipeline.coarse import CoarseParams, run_coarse
+from pipeline.graph import task_runner
+from scenes.synth import synth
+from tiling.ingest import IngestParams, ingest
+from tiling.store import RunStore
+
+PARAMS = CoarseParams(eps=0.3)
+
+
+@pytest.fixture(scope="module")
+def scan(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("coarse") / "minaret.laz"
+    synth("minaret", out, n_points=60_000, seed=2)
+    return out
+
+
+def _segment(scan_path: Path, store: Path, tile_size: float) -> np.ndarray:
+    """Global segment id per original point (core copies), after ingest + coarse."""
+    with task_runner("sync", progress=False) as run:
+        ingest([str(scan_path)], str(store), IngestParams(tile_size=tile_size, buffer=2.0), runner=run)
+        run_coarse(str(store), PARAMS, runner=run)
+    s = RunStore.open(store)
+    n = laspy.read(scan_path).header.point_count
+    labels = np.full(n, -1, dtype=np.int64)
+    for t in s.records("ingest"):
+        d = s.read_unit(f"tiles/{t}", ["index", "core"])
+        g = s.read_unit(f"coarse/tiles/{t}", ["global"])["global"]
+        labels[d["index"][d["core"]].astype(np.int64)] = g[d["core"]].astype(np.int64)
+    assert (labels >= 0).all()  # every point got exactly its core copy's label
+    return labels
+
+
+@pytest.fixture(scope="module")
+def untiled(scan, tmp_path_factory) -> np.ndarray:
+    return _segment(scan, tmp_path_factory.mktemp("untiled") / "s", 500.0)
+
+
+@pytest.mark.parametrize("tile_size", [10.0, 20.0, 50.0])
+def test_tile_size_does_not_change_the_answer(scan, untiled, tmp_path, tile_size):
+    tiled = _segment(scan, tmp_path / "s", tile_size)
+    assert adjusted_rand_score(untiled, tiled) >= 0.95
+    # no ground-truth element is split at a tile border: each element's dominant segment
+    # covers as much of it as without tiles
+    gt = np.asarray(laspy.read(scan).gt_instance)
+    for inst in np.unique(gt):
+        sel = gt == inst
+        if sel.sum() < 500:
+            continue
+        tiled_share = np.bincount(tiled[sel]).max() / sel.sum()
+        untiled_share = np.bincount(untiled[sel]).max() / sel.sum()
+        assert tiled_share >= untiled_share - 0.05, inst
+
+
+@pytest.fixture(scope="module")
+def tiled20(scan, tmp_path_factory) -> tuple[np.ndarray, Path]:
+    store = tmp_path_factory.mktemp("tiled20") / "s"
+    return _segment(scan, store, 20.0), store
+
+
+def test_tables_and_csr(tiled20):
+    labels, store = tiled20
+    s = RunStore.open(store)
+    csr = s.read_unit("coarse/csr")
+    indices, offsets = csr["indices"].astype(np.int64), csr["offsets"]
+    table = pq.read_table(store / "coarse" / "segments.parquet")
+    g_max = labels.max()
+    assert len(offsets) == g_max + 1 == table.num_rows + 1
+    for g in range(1, g_max + 1):
+        members = indices[offsets[g - 1]:offsets[g]]
+        assert (labels[members] == g).all()
+        assert len(members) == (labels == g).sum() == table.column("n_points")[g - 1].as_py()
+    assert set(table.column("kind").to_pylist()) <= {"plane", "sphere", "cylinder", "cone", "torus"}
+
+
+def test_rerun_is_resumed(tiled20, capsys):
+    assert main(["coarse", str(tiled20[1]), "--eps", "0.3", "--scheduler", "sync",
+                 "--no-progress"]) == 0
+    assert "0 run" in capsys.readouterr().out
+
+
+def test_tiny_tile_does_not_crash(tmp_path):
+    pts = np.zeros((50, 3)) + [500000.0, 3500000.0, 200.0]
+    pts[:, 0] += np.linspace(0, 1, 50)  # collinear
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.scales, header.offsets = [0.001] * 3, [500000.0, 3500000.0, 0.0]
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = pts.T
+    las.write(tmp_path / "line.las")
+    with task_runner("sync", progress=False) as run:
+        ingest([str(tmp_path / "line.las")], str(tmp_path / "s"), IngestParams(tile_size=10.0), runner=run)
+        rep = run_coarse(str(tmp_path / "s"), PARAMS, runner=run)
+    assert rep.n_segments == 0
+    assert rep.n_unsegmented == 50
+
+
+def test_store_without_ingest_is_refused(tmp_path, capsys):
+    assert main(["coarse", str(tmp_path / "nothing"), "--scheduler", "sync"]) == 2
+    assert "does not exist" in capsys.readouterr().err
