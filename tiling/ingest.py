@@ -48,14 +48,16 @@ __all__ = [
 
 STAGE = "ingest"
 MAP_STAGE = "ingest.map"
-#: A tile is reduced in SUBCELLS x SUBCELLS pieces (x-y), so memory follows the densest
-#: piece, not the tile: TLS density peaks sharply around each scanner station.
-SUBCELLS = 8
-#: Rows buffered before they are appended to a tile's arrays (about 60 MB).
+#: Fragments are sorted by SUBCELLS x SUBCELLS x-y sub-cells of their tile; the reduce phase
+#: gathers runs of sub-cells up to FLUSH_ROWS rows, so its memory follows that budget (or
+#: the densest sub-cell), not the tile: TLS density peaks sharply around each station.
+SUBCELLS = 32
+#: Rows the reduce phase gathers, sorts and appends at a time (about 60 MB).
 FLUSH_ROWS = 1_000_000
 #: Coordinate resolution for inputs that store floats (PLY, E57): 0.1 mm.
 FLOAT_SOURCE_SCALE = 0.0001
 _INT32_MAX = 2**31 - 1
+_END = np.iinfo(np.int64).max  # sentinel key closing a fragment's group table
 
 #: ``runner(fn, args_list, desc) -> results`` runs ``fn(*args)`` for every entry (as Dask
 #: tasks or in process) and returns the results in order.
@@ -337,12 +339,12 @@ def _subcell_key(xyz_world: npt.NDArray[np.float64], offset: npt.NDArray[np.floa
 
 
 def subcell_width(tile_size: float, voxel: float | None) -> float:
-    """Side of the reduce phase's sub-cells: tile / 8, a whole number of voxels.
+    """Side of the reduce phase's sub-cells: tile / SUBCELLS, a whole number of voxels.
 
     Examples
     --------
     >>> subcell_width(20.0, None), subcell_width(20.0, 0.3)
-    (2.5, 2.7)
+    (0.625, 0.9)
     """
     width = tile_size / SUBCELLS
     if voxel:
@@ -406,7 +408,8 @@ def map_chunk(url: str, unit: MapUnit, plan_attrs: dict[str, Any]) -> dict[str, 
             order = np.argsort(sub, kind="stable")
             rows, sub = rows[order], sub[order]
         starts = np.flatnonzero(np.r_[True, sub[1:] != sub[:-1]])
-        store.write_fragment(fragment_key(unit.map_id, t), rows, np.stack([sub[starts], starts], axis=1))
+        groups = np.stack([np.r_[sub[starts], _END], np.r_[starts, len(rows)]], axis=1)
+        store.write_fragment(fragment_key(unit.map_id, t), rows, groups)
         counts[str(t)] = len(rows)
     store.record(MAP_STAGE, str(unit.map_id), {
         "params_hash": plan_attrs["ingest"]["params_hash"], "tiles": counts, "n_dropped": n_dropped,
@@ -432,15 +435,6 @@ def _voxel_representatives(
     return keep, rep
 
 
-def _flush(writer: Any, pending: list[tuple[np.ndarray, dict[str, np.ndarray]]], names: list[str]) -> None:
-    if not pending:
-        return
-    arrays = {n: np.concatenate([r[n] for r, _ in pending]) for n in names}
-    for key in pending[0][1]:
-        arrays[key] = np.concatenate([e[key] for _, e in pending])
-    writer.append(arrays)
-
-
 def reduce_tile(url: str, tile: int, keys: Sequence[str], plan_attrs: dict[str, Any]) -> int:
     """Reduce task: gather a tile's fragments, Morton-sort, downsample, write, record.
 
@@ -451,22 +445,38 @@ def reduce_tile(url: str, tile: int, keys: Sequence[str], plan_attrs: dict[str, 
     scale = np.asarray(plan_attrs["coords"]["scale"])
     grid = TileGrid.from_dict(plan_attrs["grid"])
     params = plan_attrs["ingest"]["params"]
-    # Each fragment is sorted by sub-cell; gather one sub-cell at a time from all of them.
-    spans: dict[int, list[tuple[str, int, int]]] = {}
-    for k in keys:
-        groups = store.read_fragment_groups(k)
-        ends = np.r_[groups[1:, 1], np.iinfo(np.int64).max]
-        for (sub, a), b in zip(groups.tolist(), ends.tolist(), strict=True):
-            spans.setdefault(sub, []).append((k, a, b))
+    # Each fragment is sorted by sub-cell. Consecutive sub-cells are gathered into batches
+    # of about FLUSH_ROWS rows (one read per fragment and batch), so memory follows the
+    # batch (or the densest single sub-cell), never the tile.
+    tables = {k: store.read_fragment_groups(k) for k in keys}  # (key, first row) + sentinel
+    totals: dict[int, int] = {}
+    for groups in tables.values():
+        for sub, n in zip(groups[:-1, 0].tolist(), np.diff(groups[:, 1]).tolist(), strict=True):
+            totals[sub] = totals.get(sub, 0) + n
+    batches: list[tuple[int, int]] = []
+    first, acc = None, 0
+    for sub in sorted(totals):
+        first = sub if first is None else first
+        acc += totals[sub]
+        if acc >= FLUSH_ROWS:
+            batches.append((first, sub))
+            first, acc = None, 0
+    if first is not None:
+        batches.append((first, max(totals)))
     x0, y0, _, _ = grid.buffered_bounds(tile)
     offset = np.asarray(plan_attrs["coords"]["offset"])
     cell = max(1.0, round(0.01 / float(scale.min())))  # 1 cm Morton cells
     names = ["xyz", "index", "core", *fields]
     writer = store.unit_writer(f"tiles/{tile}")
-    n_points = n_core = n_pending = 0
-    pending: list[tuple[np.ndarray, dict[str, np.ndarray]]] = []
-    for sub in sorted(spans):
-        rows = np.concatenate([store.read_fragment_rows(k, a, b) for k, a, b in spans[sub]])
+    n_points = n_core = 0
+    for lo, hi in batches:
+        pieces = []
+        for k, groups in tables.items():
+            a = int(np.searchsorted(groups[:, 0], lo, side="left"))
+            b = int(np.searchsorted(groups[:, 0], hi, side="right"))
+            if a < b:  # the sentinel keeps b < len(groups)
+                pieces.append(store.read_fragment_rows(k, int(groups[a, 1]), int(groups[b, 1])))
+        rows = np.concatenate(pieces)
         # order by original index first: the result never depends on fragment order
         rows = rows[np.argsort(rows["index"], kind="stable")]
         extra: dict[str, np.ndarray] = {}
@@ -481,14 +491,9 @@ def reduce_tile(url: str, tile: int, keys: Sequence[str], plan_attrs: dict[str, 
         origin = np.array([(x0 - offset[0]) / scale[0], (y0 - offset[1]) / scale[1],
                            float(rows["xyz"][:, 2].min())])
         rows = rows[morton_order(rows["xyz"].astype(np.float64), origin=origin, cell=cell)]
-        pending.append((rows, extra))
-        n_pending += len(rows)
+        writer.append({**{n: rows[n] for n in names}, **extra})
         n_points += len(rows)
         n_core += int(rows["core"].sum())
-        if n_pending >= FLUSH_ROWS:  # append in large pieces: each append costs a write
-            _flush(writer, pending, names)
-            pending, n_pending = [], 0
-    _flush(writer, pending, names)
     empty = np.zeros(0, dtype=_row_dtype(fields))
     writer.close({**{n: empty[n] for n in names},
                   **({"voxel_dropped": np.zeros(0, np.uint64), "voxel_representative": np.zeros(0, np.uint64)}
