@@ -17,15 +17,21 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet -e ".[dev]"
 	touch $(STAMP)
 
+# The bundled default: a labelled 1 M-point scan of the Wazir Khan mosque, ingested into a
+# run store and coarse-segmented (the later stages join as they land).
 demo: $(STAMP)
 	mkdir -p out
 	$(VENV)/bin/hollowtree synth wazir_khan --points 1000000 --out out/wazir_khan.laz --overwrite
+	rm -rf out/wazir_khan.zarr
+	$(VENV)/bin/hollowtree ingest out/wazir_khan.laz --store out/wazir_khan.zarr
+	$(VENV)/bin/hollowtree coarse out/wazir_khan.zarr
 
 test: $(STAMP)
 	$(PY) -m pytest -q
 
 bench: $(STAMP)
 	$(PY) benchmarks/bench_synth.py
+	$(PY) benchmarks/bench_ingest.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache
