@@ -140,10 +140,10 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("store", help="run store made by `hollowtree ingest`")
     c.add_argument("--epsilon", type=_float, default=0.03, help="RANSAC distance, metres (default 0.03)")
     c.add_argument("--alpha", type=_float, default=20.0, help="RANSAC normal angle, degrees (default 20)")
-    c.add_argument("--cluster-epsilon", type=_float, default=0.15,
-                   help="RANSAC bitmap cell, metres (default 0.15)")
-    c.add_argument("--min-support", type=_positive_int, default=200,
-                   help="smallest primitive, points (default 200)")
+    c.add_argument("--cluster-epsilon", type=_float,
+                   help="RANSAC bitmap cell, metres (default: max(0.15, 2 x point spacing))")
+    c.add_argument("--min-support", type=_positive_int, default=1000,
+                   help="smallest primitive, points (default 1000)")
     c.add_argument("--eps", type=_float, help="DBSCAN radius, metres (default: 3 x point spacing)")
     c.add_argument("--min-samples", type=_positive_int, default=10, help="DBSCAN core threshold")
     c.add_argument("--seed", type=int, default=0)
@@ -162,9 +162,8 @@ def _cmd_coarse(args: argparse.Namespace) -> int:
 
     RunStore.open(args.store)  # a missing store or another schema fails before any cluster starts
     params = CoarseParams(
-        ransac=RansacParams(epsilon=args.epsilon, alpha_deg=args.alpha,
-                            cluster_epsilon=args.cluster_epsilon, min_support=args.min_support),
-        eps=args.eps, min_samples=args.min_samples, seed=args.seed,
+        ransac=RansacParams(epsilon=args.epsilon, alpha_deg=args.alpha, min_support=args.min_support),
+        cluster_epsilon=args.cluster_epsilon, eps=args.eps, min_samples=args.min_samples, seed=args.seed,
     )
     with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
         report = run_coarse(args.store, params, runner=run)
@@ -261,6 +260,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         level=logging.DEBUG if args.verbose else logging.WARNING,
         format="%(levelname)s %(name)s: %(message)s",
     )
+    if not args.verbose:  # dask configures its own loggers at INFO
+        for name in ("distributed", "dask"):
+            logging.getLogger(name).setLevel(logging.WARNING)
     if args.command is None:
         parser.print_help()
         return 2

@@ -54,7 +54,12 @@ class CoarseParams:
     k : int
         Neighbours of the PCA normals.
     ransac : RansacParams
-        Efficient RANSAC settings (epsilon, alpha, cluster epsilon, minimum support, ...).
+        Efficient RANSAC settings (epsilon, alpha, minimum support, ...); the stage's
+        default minimum support is 1000 points (small primitives cost most of the time
+        and the tree splits segments further anyway).
+    cluster_epsilon : float or None
+        RANSAC's bitmap cell; None = max(0.15 m, 2 x the median point spacing), computed
+        once per store, so sparse far surfaces are not shattered into bitmap islands.
     eps : float or None
         DBSCAN radius (metres); None = 3 x the median 8-NN spacing of a sample of the
         scan, computed once for the whole store so every tile uses the same value.
@@ -69,7 +74,8 @@ class CoarseParams:
     """
 
     k: int = 16
-    ransac: RansacParams = field(default_factory=RansacParams)
+    ransac: RansacParams = field(default_factory=lambda: RansacParams(min_support=1000))
+    cluster_epsilon: float | None = None
     eps: float | None = None
     min_samples: int = 10
     seed: int = 0
@@ -381,13 +387,19 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
             f"store {url}: ingest is not complete ({len(missing)} of {len(tiles)} tiles missing); "
             "rerun `hollowtree ingest` first"
         )
-    eps = params.eps
-    if eps is None:
+    eps, cluster_epsilon = params.eps, params.cluster_epsilon
+    if eps is None or cluster_epsilon is None:
         scale = np.asarray(attrs["coords"]["scale"])
         biggest = max(tiles, key=lambda t: int(done_ingest[str(t)].get("n_points", 0)))
         xyz = _tile_points(store, biggest, scale)["local"]
         sample = xyz[np.random.default_rng(params.seed).permutation(len(xyz))[:200_000]]
-        eps = default_eps(sample) if len(sample) > 10 else 0.1
+        spacing_x3 = default_eps(sample) if len(sample) > 10 else 0.3
+        eps = spacing_x3 if eps is None else eps
+        if cluster_epsilon is None:
+            cluster_epsilon = max(0.15, 2.0 * spacing_x3 / 3.0)
+    ransac = RansacParams.from_dict({**params.ransac.to_dict(), "cluster_epsilon": float(cluster_epsilon)})
+    params = CoarseParams.from_dict({**params.to_dict(), "ransac": ransac.to_dict(),
+                                     "cluster_epsilon": float(cluster_epsilon), "eps": float(eps)})
     cfg = {"params": params.to_dict(), "eps": float(eps)}
     h = hashlib.sha256(json.dumps([cfg, attrs["ingest"]["params_hash"]], sort_keys=True).encode()).hexdigest()[:16]
     cfg["params_hash"] = h

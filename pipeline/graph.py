@@ -77,6 +77,13 @@ def task_runner(
         return
     from distributed import Client, LocalCluster
 
+    # distributed sets its loggers to INFO when imported; keep them quiet unless the
+    # command runs with --verbose (root logger at DEBUG).
+    if logging.getLogger().level > logging.DEBUG:
+        for name in ("distributed", "distributed.scheduler", "distributed.nanny",
+                     "distributed.core", "distributed.http.proxy", "distributed.worker"):
+            logging.getLogger(name).setLevel(logging.WARNING)
+
     if scheduler is None:
         with LocalCluster(
             n_workers=workers, threads_per_worker=1, processes=True,
