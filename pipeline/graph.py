@@ -93,7 +93,7 @@ def task_runner(
                 print(f"dask dashboard: {client.dashboard_link}", file=sys.stderr)
             yield _client_runner(client, progress)
         return
-    with Client(scheduler, timeout="20s") as client:
+    with Client(scheduler, timeout="10s") as client:
         if progress:
             print(f"dask dashboard: {client.dashboard_link}", file=sys.stderr)
         yield _client_runner(client, progress)

@@ -266,3 +266,23 @@ def test_ply_with_nan_is_dropped_and_counted(tmp_path):
     for t in _tiles(tmp_path / "s").values():
         xyz = t["xyz"] * scale + offset
         assert np.abs(xyz - pts[t["index"].astype(np.int64)]).max() <= 0.00005 + 1e-9
+
+
+@pytest.mark.cluster
+def test_scheduler_address(scan_file, tmp_path):
+    from distributed import LocalCluster
+
+    params = IngestParams(tile_size=10.0, buffer=1.0, chunk_size=20_000)
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                      dashboard_address=":0") as cluster:
+        with task_runner(cluster.scheduler_address, progress=False) as run:
+            report = ingest([str(scan_file)], str(tmp_path / "s"), params, runner=run)
+    assert report.n_core_points == laspy.read(scan_file).header.point_count
+
+
+def test_unreachable_scheduler(scan_file, tmp_path, capsys):
+    code = main(["ingest", str(scan_file), "--store", str(tmp_path / "s"), "--scheduler",
+                 "tcp://127.0.0.1:9", "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert "scheduler" in err
