@@ -22,6 +22,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
+from primitives._validation import as_xyz as _as_xyz
 from tiling.errors import ConfigError
 
 __all__ = ["NormalResult", "estimate_normals"]
@@ -98,18 +99,6 @@ def _check_params(func: str, **values: object) -> None:
                 f"The '{name}' parameter of {func} must be {article} {kind} in the range "
                 f"{bounds}{' or None' if none_ok else ''}. Got {value!r} instead."
             )
-
-
-def _as_xyz(xyz: object, func: str) -> npt.NDArray[np.float64]:
-    arr = np.asarray(xyz, dtype=np.float64)
-    if arr.ndim != 2 or arr.shape[1] != 3:
-        raise ConfigError(
-            f"The 'xyz' parameter of {func} must be an array of shape (n_points, 3). "
-            f"Got shape {arr.shape} instead."
-        )
-    if not np.isfinite(arr).all():
-        raise ConfigError(f"The 'xyz' parameter of {func} must be finite. Got NaN or inf instead.")
-    return arr
 
 
 # -- the kernel ----------------------------------------------------------------------------
