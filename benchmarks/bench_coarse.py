@@ -8,7 +8,7 @@ runs and times:
   ``rng=0``), DBSCAN per primitive (``eps = default_eps(xyz)``, ``min_samples=10``),
   each stage separately;
 * **CGAL** (Python bindings, module ``CGAL``): PCA normals (k = 16) and
-  ``efficient_RANSAC`` (plane, cylinder, sphere, cone; tori off since ours has none) with
+  ``efficient_RANSAC`` (plane, cylinder, sphere, cone; tori off since ours searches none by default) with
   the matched parameters epsilon 0.03, cluster epsilon 0.15, normal threshold cos 20° =
   0.940, min points 200, probability 0.01; and a second, scan-tuned setting (see
   ``CGAL_TUNED``). CGAL runs in a child process (``--cgal-worker``) so that a crash

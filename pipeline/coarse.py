@@ -7,7 +7,7 @@ and after all tiles joins the tiles' segments across their shared buffer points.
 
 Store layout written here (``docs/store.md``)::
 
-    coarse/tiles/<tile>/primitive   uint8 (n,)   0 none, 1 plane, 2 sphere, 3 cylinder, 4 cone
+    coarse/tiles/<tile>/primitive   uint8 (n,)   0 none, 1 plane, 2 sphere, 3 cylinder, 4 cone, 5 torus
     coarse/tiles/<tile>/segment     int32 (n,)   tile-local segment, 0 = unsegmented
     coarse/tiles/<tile>/global      uint64 (n,)  global segment of core rows (0 elsewhere)
     coarse/tables/<tile>.parquet                 the tile's segments
@@ -232,6 +232,12 @@ def _same_primitive(a: dict[str, Any], b: dict[str, Any], p: CoarseParams) -> bo
         d = pb[:3] - pa_[:3]
         off_axis = np.linalg.norm(d - (d @ axis_a) * axis_a)
         return off_axis <= p.distance_tol + p.radius_tol * pa_[6] and abs(pa_[6] - pb[6]) <= p.radius_tol * max(pa_[6], pb[6])
+    if a["kind"] == "torus":  # centre (3), axis (3), major R, minor r
+        if abs(float(pa_[3:6] @ pb[3:6])) < cos_tol:
+            return False
+        return (np.linalg.norm(pa_[:3] - pb[:3]) <= p.distance_tol + p.radius_tol * pa_[6]
+                and abs(pa_[6] - pb[6]) <= p.radius_tol * max(pa_[6], pb[6])
+                and abs(pa_[7] - pb[7]) <= p.radius_tol * max(pa_[7], pb[7]) + p.distance_tol)
     if a["kind"] == "cone":
         if abs(float(pa_[3:6] @ pb[3:6])) < cos_tol:
             return False

@@ -2,7 +2,7 @@
 
 - :func:`estimate_normals`: k-NN PCA normals and surface variation;
 - :func:`efficient_ransac`: Efficient RANSAC (Schnabel, Wahl and Klein 2007) for planes,
-  spheres, cylinders and cones (tori are not built yet);
+  spheres, cylinders and cones by default, and tori on request (``shapes=KINDS``);
 - :func:`dbscan_labels`, :func:`dbscan_segments`, :func:`default_eps`: exact DBSCAN
   (scikit-learn's labels) and its per-primitive use;
 - :class:`UnionFind`, :func:`stitch_segments`, :func:`csr_by_segment`: joining tile-local
