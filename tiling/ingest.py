@@ -376,7 +376,7 @@ def map_chunk(url: str, unit: MapUnit, plan_attrs: dict[str, Any]) -> dict[str, 
         n_dropped += block.n_dropped
         if not len(block.xyz):
             continue
-        point, tile, is_core = grid.route(block.xyz, outside="flag")
+        point, tile, is_core = grid.route(block.xyz, outside="flag", sort=False)
         if np.count_nonzero(is_core) != len(block.xyz):  # each point has one core pair
             raise CorruptInputError(
                 f"{unit.path}: points outside the bounds its header gives (records {unit.start}-{unit.stop})"
@@ -390,13 +390,14 @@ def map_chunk(url: str, unit: MapUnit, plan_attrs: dict[str, Any]) -> dict[str, 
         order = np.lexsort((sub, tile))
         point, tile, is_core, sub = point[order], tile[order], is_core[order], sub[order]
         rows = np.empty(len(point), dtype=dtype)
-        rows["xyz"] = np.round((block.xyz[point] - offset) / scale).astype(np.int32)
-        rows["index"] = block.index[point] + np.uint64(unit.base)
+        quantised = np.round((block.xyz - offset) / scale).astype(np.int32)
+        rows["xyz"] = np.take(quantised, point, axis=0)
+        rows["index"] = np.take(block.index, point) + np.uint64(unit.base)
         rows["core"] = is_core
-        rows["core_tile"] = core_of_point[point]
+        rows["core_tile"] = np.take(core_of_point, point)
         for name in fields:
             src = block.extra.get(name[6:]) if name.startswith("extra.") else getattr(block, name)
-            rows[name] = np.asarray(src)[point] if src is not None else 0
+            rows[name] = np.take(np.asarray(src), point, axis=0) if src is not None else 0
         cuts = np.flatnonzero(np.r_[True, tile[1:] != tile[:-1], True])
         for a, b in zip(cuts[:-1], cuts[1:], strict=True):
             parts.setdefault(int(tile[a]), []).append((rows[a:b], sub[a:b]))
@@ -477,23 +478,27 @@ def reduce_tile(url: str, tile: int, keys: Sequence[str], plan_attrs: dict[str, 
             if a < b:  # the sentinel keeps b < len(groups)
                 pieces.append(store.read_fragment_rows(k, int(groups[a, 1]), int(groups[b, 1])))
         rows = np.concatenate(pieces)
-        # order by original index first: the result never depends on fragment order
-        rows = rows[np.argsort(rows["index"], kind="stable")]
+        # Order by original index first, so the result never depends on fragment order;
+        # the permutations are composed and every field is gathered once, contiguously.
+        perm = np.argsort(rows["index"])  # unique within a tile: any sort is stable
         extra: dict[str, np.ndarray] = {}
         if params.get("voxel"):
+            xyz_i, idx_i = np.take(rows["xyz"], perm, axis=0), np.take(rows["index"], perm)
             keep, rep = _voxel_representatives(
-                rows["xyz"], rows["index"], rows["core_tile"], scale=scale, voxel=params["voxel"]
+                xyz_i, idx_i, np.take(rows["core_tile"], perm), scale=scale, voxel=params["voxel"]
             )
-            dropped = rows["core"] & ~keep
-            extra["voxel_dropped"] = rows["index"][dropped]
-            extra["voxel_representative"] = rows["index"][rep[dropped]]
-            rows = rows[keep]
+            dropped = np.take(rows["core"], perm) & ~keep
+            extra["voxel_dropped"] = idx_i[dropped]
+            extra["voxel_representative"] = idx_i[rep[dropped]]
+            perm = perm[keep]
+        xyz = np.take(rows["xyz"], perm, axis=0)
         origin = np.array([(x0 - offset[0]) / scale[0], (y0 - offset[1]) / scale[1],
-                           float(rows["xyz"][:, 2].min())])
-        rows = rows[morton_order(rows["xyz"].astype(np.float64), origin=origin, cell=cell)]
-        writer.append({**{n: rows[n] for n in names}, **extra})
-        n_points += len(rows)
-        n_core += int(rows["core"].sum())
+                           float(xyz[:, 2].min())])
+        perm = perm[morton_order(xyz, origin=origin, cell=cell)]
+        out = {n: np.take(rows[n], perm, axis=0) for n in names}  # take: 3x faster than [perm] here
+        writer.append({**out, **extra})
+        n_points += len(perm)
+        n_core += int(np.count_nonzero(out["core"]))
     empty = np.zeros(0, dtype=_row_dtype(fields))
     writer.close({**{n: empty[n] for n in names},
                   **({"voxel_dropped": np.zeros(0, np.uint64), "voxel_representative": np.zeros(0, np.uint64)}

@@ -246,11 +246,22 @@ class RunStore:
 
 
 class _UnitWriter:
-    """Appends rows to the arrays of one group, piece by piece (bounded memory)."""
+    """Appends rows to the arrays of one group, piece by piece (bounded memory).
+
+    Rows are held back until they fill whole chunks, so every chunk is compressed and
+    written once (no read-modify-write of a partial last chunk) and each array's metadata
+    is rewritten once per flush, not once per piece. At most ``FLUSH_CHUNKS`` chunks per
+    array wait in memory.
+    """
+
+    FLUSH_CHUNKS = 4
 
     def __init__(self, group: zarr.Group) -> None:
         self._group = group
         self._arrays: dict[str, zarr.Array] = {}
+        self._pending: dict[str, list[npt.NDArray[Any]]] = {}
+        self._n_pending: dict[str, int] = {}
+        self._n_written: dict[str, int] = {}
 
     def _create(self, name: str, values: npt.NDArray[Any]) -> zarr.Array:
         arr = self._group.create_array(
@@ -258,17 +269,40 @@ class _UnitWriter:
             chunks=(CHUNK_POINTS, *values.shape[1:]), compressors=_COMPRESSOR, overwrite=True,
         )
         self._arrays[name] = arr
+        self._pending[name], self._n_pending[name], self._n_written[name] = [], 0, 0
         return arr
+
+    def _flush(self, name: str, *, final: bool) -> None:
+        n = self._n_pending[name]
+        take = n if final else (n // CHUNK_POINTS) * CHUNK_POINTS
+        if take == 0:
+            return
+        pieces = self._pending[name]
+        values = pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
+        arr, start = self._arrays[name], self._n_written[name]
+        arr.resize((start + take, *values.shape[1:]))
+        arr[start:start + take] = values[:take]
+        rest = values[take:]
+        self._pending[name] = [rest] if len(rest) else []
+        self._n_pending[name] = len(rest)
+        self._n_written[name] = start + take
 
     def append(self, arrays: Mapping[str, npt.NDArray[Any]]) -> None:
         for name, values in arrays.items():
-            values = np.ascontiguousarray(values)
-            arr = self._arrays.get(name) or self._create(name, values)
+            values = np.asarray(values)
+            if name not in self._arrays:
+                self._create(name, values)
             if len(values):
-                arr.append(values, axis=0)
+                self._pending[name].append(values)
+                self._n_pending[name] += len(values)
+                if self._n_pending[name] >= self.FLUSH_CHUNKS * CHUNK_POINTS:
+                    self._flush(name, final=False)
 
     def close(self, templates: Mapping[str, npt.NDArray[Any]]) -> None:
-        """Create the arrays that never received rows, empty, from ``templates``."""
+        """Write what is held back; create the arrays that never received rows, empty,
+        from ``templates``."""
+        for name in list(self._arrays):
+            self._flush(name, final=True)
         for name, values in templates.items():
             if name not in self._arrays:
                 self._create(name, np.asarray(values))
