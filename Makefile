@@ -17,14 +17,11 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet -e ".[dev]"
 	touch $(STAMP)
 
-# The bundled default: a labelled 1 M-point scan of the Wazir Khan mosque, ingested into a
-# run store and coarse-segmented (the later stages join as they land).
+# The bundled default: workflows/local.yaml makes a labelled 1 M-point scan of the Wazir Khan
+# mosque on first use and runs every stage on it on a local Dask cluster; a rerun resumes
+# (or says there is nothing to do).
 demo: $(STAMP)
-	mkdir -p out
-	$(VENV)/bin/hollowtree synth wazir_khan --points 1000000 --out out/wazir_khan.laz --overwrite
-	rm -rf out/wazir_khan.zarr
-	$(VENV)/bin/hollowtree ingest out/wazir_khan.laz --store out/wazir_khan.zarr
-	$(VENV)/bin/hollowtree coarse out/wazir_khan.zarr
+	$(VENV)/bin/hollowtree run workflows/local.yaml
 
 test: $(STAMP)
 	$(PY) -m pytest -q

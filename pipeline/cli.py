@@ -151,7 +151,183 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
     c.add_argument("--no-progress", action="store_true", help="no progress bars")
     c.set_defaults(func=_cmd_coarse)
+
+    tr = sub.add_parser(
+        "tree",
+        help="the hierarchical tree with HollowNet for every coarse segment of a store",
+        description=(
+            "Build the paper's hierarchical tree (three projection sequences, the five-term "
+            "energy, greedy recursion) for every global coarse segment of a store, one Dask "
+            "task per batch of segments. Rerunning resumes: recorded batches are skipped."
+        ),
+    )
+    tr.add_argument("store", help="run store after `hollowtree coarse`")
+    tr.add_argument("--max-depth", type=int, default=3, help="maximum depth d (default 3)")
+    tr.add_argument("--threshold", type=_float, help="keep a split when xi >= this (default: the fitted model's)")
+    tr.add_argument("--batch-points", type=_positive_int, default=1_000_000,
+                    help="points per task; small segments are batched (default 1,000,000)")
+    tr.add_argument("--weights", help="HollowNet weights (default: the shipped ones)")
+    tr.add_argument("--seed", type=int, default=0)
+    tr.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process")
+    tr.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
+    tr.add_argument("--no-progress", action="store_true", help="no progress bars")
+    tr.set_defaults(func=_cmd_tree)
+
+    fe = sub.add_parser(
+        "fit-energy",
+        help="refit the tree's energy weights w and prior W on synthetic scenes",
+        description=(
+            "Scan the training scenes, collect split proposals with known targets and fit "
+            "xi = w . e by linear regression (docs/method.md). Same seed, same model."
+        ),
+    )
+    fe.add_argument("--seed", type=int, default=0)
+    fe.add_argument("--out", type=Path, default=Path("energy-v1.json"),
+                    help="output JSON (default energy-v1.json; the shipped one is tree/data/energy-v1.json)")
+    fe.add_argument("--overwrite", action="store_true", help="replace an existing output")
+    fe.set_defaults(func=_cmd_fit_energy)
+
+    r = sub.add_parser(
+        "run",
+        help="run a workflow YAML: ingest -> coarse -> tree -> labels -> outputs",
+        description=(
+            "Run every stage of a workflow file on a local Dask cluster or a scheduler. "
+            "Rerunning resumes: recorded units are skipped; a changed parameter redoes its "
+            "stage and the ones after it. One run at a time per store."
+        ),
+    )
+    r.add_argument("workflow", nargs="?", type=Path, help="workflow YAML (see docs/workflows.md)")
+    r.add_argument("--scheduler", help="Dask scheduler address (overrides cluster.scheduler)")
+    r.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY.PATH=VALUE",
+                   help="override a workflow value, e.g. --set coarse.epsilon=0.05 (repeatable)")
+    r.add_argument("--schema", action="store_true", help="print the workflow JSON Schema and exit")
+    r.add_argument("--no-progress", action="store_true", help="no progress bars")
+    r.set_defaults(func=_cmd_run)
+
+    st = sub.add_parser("status", help="per stage: units done / total and the parameters used",
+                        description="Show what a run store holds: per stage, units done / total and parameters.")
+    st.add_argument("store", help="run store")
+    st.set_defaults(func=_cmd_status)
+
+    e = sub.add_parser(
+        "export", help="write labelled points (LAS/LAZ), tables (Parquet) or views (PNG) of a run",
+        description="Export the labels of a finished run: every input point in input order with "
+                    "class_id, instance_id, segment_id, score, primitive_id and the LAS classification.",
+    )
+    e.add_argument("store", help="run store")
+    e.add_argument("--las", type=Path, help="output .las or .laz")
+    e.add_argument("--parquet", type=Path, help="folder for segments.parquet (and tree.parquet)")
+    e.add_argument("--png", type=Path, help="top and side views coloured by class")
+    e.add_argument("--no-progress", action="store_true", help="no progress bar")
+    e.set_defaults(func=_cmd_export)
     return parser
+
+
+def _cmd_tree(args: argparse.Namespace) -> int:
+    from pipeline.graph import task_runner
+    from pipeline.tree_stage import TreeStageParams, run_tree
+    from tiling.store import RunStore
+
+    RunStore.open(args.store)
+    params = TreeStageParams(max_depth=args.max_depth, threshold=args.threshold, batch_points=args.batch_points,
+                             weights=args.weights, seed=args.seed)
+    with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
+        report = run_tree(args.store, params, runner=run)
+    print(report.summary())
+    return 0
+
+
+def _cmd_fit_energy(args: argparse.Namespace) -> int:
+    from tiling.errors import ConfigError
+    from tree.fit import fit_energy_from_scenes
+
+    if args.out.exists() and not args.overwrite:
+        raise ConfigError(f"{args.out} exists; pass --overwrite to replace it")
+    if not args.out.parent.is_dir():
+        raise ConfigError(f"{args.out}: folder {args.out.parent} does not exist")
+    model = fit_energy_from_scenes(args.seed)
+    model.save(args.out)
+    w = ", ".join(f"e{i + 1} {v:.3f}" for i, v in enumerate(model.w))
+    print(f"{args.out}: R^2 {model.r2:.3f}; w = ({w}); threshold {model.threshold:.3f}")
+    return 0
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from pipeline.workflow import WorkflowError, load_workflow, schema_text
+
+    if args.schema:
+        sys.stdout.write(schema_text())
+        return 0
+    if args.workflow is None:
+        raise WorkflowError("give a workflow file, e.g. hollowtree run workflows/local.yaml")
+    overrides = list(args.overrides)
+    if args.scheduler:
+        overrides.append(f"cluster.scheduler={args.scheduler}")
+    wf = load_workflow(args.workflow, overrides)
+    from pipeline.run import run_workflow
+
+    try:
+        report = run_workflow(wf, progress=not args.no_progress)
+    except OSError as exc:
+        sched = wf.cluster.scheduler
+        if sched not in (None, "sync") and "scheduler" not in str(exc).lower():
+            raise WorkflowError(f"cannot reach the Dask scheduler {sched}: {exc}") from None
+        raise
+    if report.class_counts:
+        total = sum(report.class_counts.values())
+        print(f"{'class':<14}{'points':>14}{'share':>9}")
+        for name, n in report.class_counts.items():
+            print(f"{name:<14}{n:>14,}{100 * n / total:>8.1f}%")
+    print(f"{report.store}: done in {report.seconds:.1f} s")
+    return 0
+
+
+def _cmd_status(args: argparse.Namespace) -> int:
+    import json
+
+    from tiling.lock import StoreLock
+    from tiling.store import RunStore
+
+    store = RunStore.open(args.store)
+    attrs = store.attrs
+    stages = attrs.get("stages", {})
+    holder = StoreLock(args.store).holder()
+    print(f"store {args.store} (schema {attrs.get('schema_version')})"
+          + (f"; in use by pid {holder.get('pid')} on {holder.get('host')}" if holder else ""))
+    expected = {"ingest": len(attrs.get("ingest", {}).get("tiles", []))}
+    units = {"ingest": "tiles", "coarse": "tiles", "tree": "batches", "labels": "ranges"}
+    wf = attrs.get("workflow", {})
+    for stage in ("ingest", "coarse", "tree", "labels"):
+        recs = store.records(stage)
+        info = stages.get(stage, {})
+        h = info.get("params_hash") or attrs.get(stage, {}).get("params_hash")
+        done = sum(1 for v in recs.values() if h is None or v.get("params_hash") == h)
+        total = info.get("units", expected.get(stage, expected["ingest"] if stage == "coarse" else "?"))
+        if not recs and not info:
+            print(f"  {stage:<8} not run")
+            continue
+        params = wf.get(stage) or info.get("params") or attrs.get(stage, {}).get("params") or {}
+        print(f"  {stage:<8} {done}/{total} {units[stage]} done; parameters: {json.dumps(params, sort_keys=True)}")
+    return 0
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from pipeline.export import export_las, export_parquet, export_png
+    from tiling.errors import ConfigError
+    from tiling.store import RunStore
+
+    if not (args.las or args.parquet or args.png):
+        raise ConfigError("give at least one of --las, --parquet, --png")
+    store = RunStore.open(args.store)
+    if args.las:
+        n = export_las(store, args.las, progress=not args.no_progress)
+        print(f"{args.las}: {n:,} points")
+    if args.parquet:
+        for path in export_parquet(store, args.parquet):
+            print(path)
+    if args.png:
+        print(export_png(store, args.png))
+    return 0
 
 
 def _cmd_coarse(args: argparse.Namespace) -> int:

@@ -36,7 +36,7 @@ from primitives.ransac import RansacParams, efficient_ransac
 from primitives.stitch import UnionFind
 from tiling.errors import ConfigError, PipelineError
 from tiling.grid import TileGrid
-from tiling.store import RunStore
+from tiling.store import CHUNK_POINTS, RunStore
 
 __all__ = ["CoarseParams", "PRIMITIVE_CODES", "coarse_tile", "run_coarse", "CoarseReport"]
 
@@ -320,42 +320,59 @@ def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tupl
     n_segments = len(live)
 
     # Per tile: the global id of every core row; counts per global segment for the CSR.
-    counts = np.zeros(n_segments + 1, dtype=np.int64)
-    for t in tiles:
-        seg = store.read_unit(f"coarse/tiles/{t}", ["segment"])["segment"]
+    def tile_global(t: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        arrays = store.read_unit(f"coarse/tiles/{t}", ["primitive", "segment"])
+        seg = arrays["segment"]
         core = store.read_unit(f"tiles/{t}", ["core"])["core"]
         lookup = np.zeros(int(seg.max(initial=0)) + 1, dtype=np.int64)
-        for (tt, s), g in zip(keys, key_global.tolist(), strict=True):
-            if tt == t:
-                lookup[s] = g
-        glob = np.where(core, lookup[seg], 0).astype(np.uint64)
-        store.write_unit(f"coarse/tiles/{t}", {**store.read_unit(f"coarse/tiles/{t}"), "global": glob})
-        counts += np.bincount(glob.astype(np.int64), minlength=n_segments + 1)
-    # CSR of original indices by global segment, filled through a disk-backed scratch
-    # array so the driver never holds the scan in memory.
+        for s_, g in local_to_global.get(t, ()):
+            lookup[s_] = g
+        return np.where(core, lookup[seg], 0).astype(np.int64), arrays
+
+    local_to_global: dict[int, list[tuple[int, int]]] = {}
+    for (tt, s_), g in zip(keys, key_global.tolist(), strict=True):
+        local_to_global.setdefault(tt, []).append((s_, g))
+    counts = np.zeros(n_segments + 1, dtype=np.int64)
+    for t in tiles:
+        counts += np.bincount(tile_global(t)[0], minlength=n_segments + 1)
+    # The CSR (original index and store xyz of every core point, grouped by global
+    # segment) is filled through disk-backed scratch arrays, so the driver never holds
+    # the scan in memory. Each tile also keeps the CSR position of its core rows.
     offsets = np.r_[0, np.cumsum(counts[1:])].astype(np.int64)
     total = int(offsets[-1])
-    with tempfile.TemporaryFile() as scratch:
-        buf = np.memmap(scratch, dtype=np.uint64, mode="w+", shape=(max(total, 1),))
+    with tempfile.TemporaryFile() as scratch_i, tempfile.TemporaryFile() as scratch_x:
+        buf = np.memmap(scratch_i, dtype=np.uint64, mode="w+", shape=(max(total, 1),))
+        bxyz = np.memmap(scratch_x, dtype=np.int32, mode="w+", shape=(max(total, 1), 3))
         cursor = offsets[:-1].copy()
         for t in tiles:
-            glob = store.read_unit(f"coarse/tiles/{t}", ["global"])["global"].astype(np.int64)
-            index = store.read_unit(f"tiles/{t}", ["index"])["index"]
-            sel = glob > 0
-            if not sel.any():
-                continue
-            g, ix = glob[sel], index[sel]
-            order = np.argsort(g, kind="stable")
-            g, ix = g[order], ix[order]
-            starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
-            ends = np.r_[starts[1:], len(g)]
-            for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
-                gg = int(g[a]) - 1
-                buf[cursor[gg]:cursor[gg] + (b - a)] = ix[a:b]
-                cursor[gg] += b - a
+            glob, arrays = tile_global(t)
+            d = store.read_unit(f"tiles/{t}", ["index", "xyz"])
+            pos = np.full(len(glob), -1, dtype=np.int64)
+            rows = np.flatnonzero(glob > 0)
+            if len(rows):
+                g = glob[rows]
+                order = np.argsort(g, kind="stable")
+                rows, g = rows[order], g[order]
+                starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
+                ends = np.r_[starts[1:], len(g)]
+                for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
+                    gg = int(g[a]) - 1
+                    span = np.arange(cursor[gg], cursor[gg] + (b - a))
+                    pos[rows[a:b]] = span
+                    buf[span[0]:span[-1] + 1] = d["index"][rows[a:b]]
+                    bxyz[span[0]:span[-1] + 1] = d["xyz"][rows[a:b]]
+                    cursor[gg] += b - a
+            store.write_unit(f"coarse/tiles/{t}", {**arrays, "global": glob.astype(np.uint64), "csr_pos": pos})
         buf.flush()
-        store.write_unit("coarse/csr", {"indices": np.asarray(buf[:total]), "offsets": offsets})
-        del buf
+        bxyz.flush()
+        store.write_unit("coarse/csr", {"offsets": offsets})
+        store.create_array("coarse/csr/indices", shape=(total,), dtype=np.uint64)
+        store.create_array("coarse/csr/xyz", shape=(total, 3), dtype=np.int32)
+        step = 4 * CHUNK_POINTS  # whole chunks, a few tens of MB at a time
+        for a in range(0, total, step):
+            store.write_slice("coarse/csr/indices", a, np.asarray(buf[a:a + step]))
+            store.write_slice("coarse/csr/xyz", a, np.asarray(bxyz[a:a + step]))
+        del buf, bxyz
     # The global table: one row per global segment (the primitive of its largest member).
     members: dict[int, list[dict[str, Any]]] = {}
     for k, g in zip(keys, key_global.tolist(), strict=True):
@@ -415,11 +432,15 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     done = {k for k, v in store.records(STAGE).items() if v.get("params_hash") == h}
     todo = [t for t in tiles if str(t) not in done]
     runner(coarse_tile, [(url, t, cfg) for t in todo], "coarse: tiles")
-    n_segments, n_keys = _stitch(store, tiles, params)
+    previous = stages.get(STAGE, {})
+    if not todo and previous.get("params_hash") == h and "n_tile_segments" in previous:
+        n_segments, n_keys = int(previous["n_segments"]), int(previous["n_tile_segments"])  # stitched before
+    else:
+        n_segments, n_keys = _stitch(store, tiles, params)
     recs = store.records(STAGE)
     store.update_attrs({"stages": {**store.attrs.get("stages", {}), STAGE: {
         "params_hash": h, "units": len(tiles), "done": len(tiles), "eps": float(eps),
-        "params": params.to_dict(), "n_segments": n_segments}}})
+        "params": params.to_dict(), "n_segments": n_segments, "n_tile_segments": n_keys}}})
     return CoarseReport(
         store=url, n_tiles=len(tiles), tiles_run=len(todo), tiles_skipped=len(tiles) - len(todo),
         n_tile_segments=n_keys, n_segments=n_segments,

@@ -549,12 +549,16 @@ def _differences(old: dict[str, Any], new: dict[str, Any], prefix: str = "") -> 
     return out
 
 
-def open_for_ingest(url: str, plan: IngestPlan) -> RunStore:
-    """Create the store, or reopen it to resume the same ingest; refuse another one."""
+def open_for_ingest(url: str, plan: IngestPlan, *, replace: bool = False) -> RunStore:
+    """Create the store, or reopen it to resume the same ingest; refuse another one
+    (or, with ``replace``, empty the store and start this one)."""
     attrs = plan.attrs()
     if RunStore.exists(url):
         store = RunStore.open(url, mode="a")
         old = store.attrs.get("ingest", {})
+        if old.get("params_hash") != plan.params_hash and replace:
+            store.reset(attrs)
+            return store
         if old.get("params_hash") != plan.params_hash:
             diffs = _differences(old.get("params", {}), plan.params.to_dict())
             old_src = [(s.get("path"), s.get("size_bytes")) for s in store.attrs.get("sources", [])]
@@ -574,6 +578,7 @@ def ingest(
     params: IngestParams,
     *,
     runner: Runner,
+    replace: bool = False,
 ) -> IngestReport:
     """Ingest ``inputs`` into the run store at ``url``, resuming a previous run there.
 
@@ -587,11 +592,14 @@ def ingest(
     params : IngestParams
     runner : callable
         ``runner(fn, args_list, desc)``; see :data:`Runner`.
+    replace : bool
+        When the store holds an ingest with other parameters or inputs: empty it and
+        ingest anew (``hollowtree run`` after a changed parameter) instead of refusing.
     """
     t0 = time.perf_counter()
     url = str(url)
     plan = plan_ingest(inputs, params)
-    store = open_for_ingest(url, plan)
+    store = open_for_ingest(url, plan, replace=replace)
     attrs = store.attrs
     h = plan.params_hash
 

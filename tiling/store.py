@@ -86,10 +86,11 @@ class RunStore:
             parent = Path(url).resolve().parent
             if not parent.is_dir():
                 raise StoreError(f"store {url}: folder {parent} does not exist")
-            if Path(url).exists() and any(Path(url).iterdir()):
+            if Path(url).exists() and any(p.name != "run.lock" for p in Path(url).iterdir()):
                 raise StoreError(f"store {url} exists and is not a hollowtree store")
         try:
-            root = zarr.open_group(store=url, mode="w")
+            # "a", not "w": "w" would also delete the run lock that `hollowtree run` put there
+            root = zarr.open_group(store=url, mode="a")
             root.attrs.update({"schema_version": SCHEMA_VERSION, **attrs})
             for name in ("tiles", "fragments", "records"):
                 root.require_group(name)
@@ -98,6 +99,21 @@ class RunStore:
         except OSError as exc:
             raise StoreError(f"store {url} cannot be written: {exc}") from None
         return cls(root, url)
+
+    def reset(self, attrs: Mapping[str, Any]) -> None:
+        """Delete every group of the store and start over with root ``attrs``.
+
+        For a run whose ingest parameters changed: everything in the store was made
+        from the old ones. Files beside the Zarr hierarchy (the run lock) stay.
+        """
+        for name in list(self._root.group_keys()) + list(self._root.array_keys()):
+            del self._root[name]
+        self._root.attrs.put({"schema_version": SCHEMA_VERSION, **attrs})
+        for name in ("tiles", "fragments", "records"):
+            self._root.require_group(name)
+        fs, base = self._fs()
+        if fs.exists(base):
+            fs.rm(base, recursive=True)
 
     @staticmethod
     def exists(url: str | Path) -> bool:
@@ -158,6 +174,46 @@ class RunStore:
     def unit_arrays(self, group: str) -> list[str]:
         """Names of the arrays in group path ``group``."""
         return sorted(self._root[group].array_keys())
+
+    def create_array(self, path: str, *, shape: tuple[int, ...], dtype: Any,
+                     chunks: int = CHUNK_POINTS) -> None:
+        """Create (or replace) an empty array at ``path`` (``group/name``), filled with 0.
+
+        Writers then fill it with :meth:`write_slice`, each writing whole chunks only.
+        """
+        group, _, name = path.rpartition("/")
+        g = self._root.require_group(group) if group else self._root
+        g.create_array(name, shape=shape, dtype=dtype, chunks=(chunks, *shape[1:]),
+                       compressors=_COMPRESSOR, fill_value=0, overwrite=True)
+
+    def write_slice(self, path: str, start: int, values: npt.NDArray[Any]) -> None:
+        """Write ``values`` at rows ``[start, start + len(values))`` of the array at
+        ``path``. Callers keep ``start`` on a chunk boundary and the end on one (or at
+        the array's end), so concurrent writers never share a chunk."""
+        arr = self._root[path]
+        arr[start:start + len(values)] = np.ascontiguousarray(values)
+
+    def read_slice(self, path: str, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """Rows ``[start, stop)`` of the array at ``path``."""
+        arr = self._root[path]
+        return arr[start:stop]
+
+    def array_length(self, path: str) -> int:
+        """Length of the array at ``path`` along its first axis."""
+        return int(self._root[path].shape[0])
+
+    def has(self, path: str) -> bool:
+        """Whether a group or array exists at ``path``."""
+        try:
+            self._root[path]
+        except KeyError:
+            return False
+        return True
+
+    def delete(self, path: str) -> None:
+        """Delete the group or array at ``path`` (no error when it is absent)."""
+        if self.has(path):
+            del self._root[path]
 
     # ------------------------------------------------------------------ fragments
     def _fs(self) -> tuple[Any, str]:

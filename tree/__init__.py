@@ -1,6 +1,57 @@
 """The hierarchical tree (paper: projection sequences, five-term energy, greedy recursion).
 
-Not built yet: issue 6 builds it. Nothing here is importable beyond this docstring.
+- :mod:`tree.operators`: ``v1``, ``psi`` (circle and n-gon RANSAC), ``p``, ``u``, ``h``,
+  ``v2``, ``rho`` as pure NumPy/SciPy kernels;
+- :mod:`tree.sequences`: ``S1``, ``S2``, ``S3`` proposing splits of one node;
+- :mod:`tree.energy`: ``e1``..``e5``, ``xi = w . e`` and the versioned energy model;
+- :mod:`tree.build`: Algorithm 1 on one segment (:func:`build_tree`);
+- :mod:`tree.fit`: the regression of ``w`` and the prior ``W`` on synthetic scenes.
+
+The per-segment Dask tasks and the CLI live in ``pipeline/``.
 """
 
-__all__: list[str] = []
+from tree.build import NodeTable, TreeResult, build_tree
+from tree.energy import (
+    Classifier,
+    EnergyModel,
+    e1,
+    e2,
+    e3,
+    e4,
+    e5,
+    energy_terms,
+    load_energy_model,
+)
+from tree.operators import TransportCurve, fit_circle, fit_ngon, h, p, psi, rho, u, v1, v2
+from tree.sequences import Proposal, SequenceParams, propose, s1, s2, s3
+
+__all__ = [
+    "Classifier",
+    "EnergyModel",
+    "NodeTable",
+    "Proposal",
+    "SequenceParams",
+    "TransportCurve",
+    "TreeResult",
+    "build_tree",
+    "e1",
+    "e2",
+    "e3",
+    "e4",
+    "e5",
+    "energy_terms",
+    "fit_circle",
+    "fit_ngon",
+    "h",
+    "load_energy_model",
+    "p",
+    "propose",
+    "psi",
+    "rho",
+    "s1",
+    "s2",
+    "s3",
+    "u",
+    "v1",
+    "v2",
+]

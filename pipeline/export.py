@@ -1,0 +1,261 @@
+"""Labels back to the user: LAS/LAZ with every input point, Parquet tables, PNG views.
+
+* :func:`export_las` streams the run's input files in order (1 M records at a time) and
+  writes each record again with all its original dimensions, plus extra-bytes dimensions
+  ``class_id`` (uint8), ``instance_id`` (uint32), ``segment_id`` (uint64), ``score``
+  (float32) and ``primitive_id`` (uint8) read from the store's label arrays, and the LAS
+  ``classification`` set by :data:`LAS_CLASSIFICATION`. The output is LAS 1.4 with a
+  point format of 6 or above (formats 0-5 are upgraded: their 5-bit classification
+  cannot hold the element codes). Records of PLY/E57 inputs with non-finite coordinates
+  were dropped at ingest and are not exported (the ingest reported their count).
+* :func:`export_parquet` copies the segment and tree tables.
+* :func:`export_png` draws a top and a side view of a sample of the labelled points,
+  coloured by class, like the paper's result figures.
+
+All three write to a temporary name and rename at the end, so an interrupted export
+never leaves a half file under the requested name.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import laspy
+import numpy as np
+
+from tiling.classes import CLASS_NAMES, NUM_CLASSES, ClassId
+from tiling.errors import ConfigError, PipelineError
+from tiling.readers import read_blocks
+from tiling.store import RunStore
+
+__all__ = ["LAS_CLASSIFICATION", "CLASS_COLOURS", "export_las", "export_parquet", "export_png", "write_outputs"]
+
+#: LAS classification written for each hollowtree class: ASPRS codes where one exists
+#: (1 unclassified, 2 ground, 6 building), user-definable codes 64-67 for the elements.
+LAS_CLASSIFICATION: dict[ClassId, int] = {
+    ClassId.UNCLASSIFIED: 1, ClassId.GROUND: 2, ClassId.WALL: 6, ClassId.ROOF: 6,
+    ClassId.ARCH: 64, ClassId.DOME: 65, ClassId.MINARET: 66, ClassId.PILLAR: 67, ClassId.OTHER: 1,
+}
+#: RGB (0-1) of each class in the PNG views, indexed by class id.
+CLASS_COLOURS = np.array([
+    (0.75, 0.75, 0.75), (0.55, 0.45, 0.30), (0.85, 0.70, 0.50), (0.60, 0.20, 0.20), (0.10, 0.45, 0.85),
+    (0.95, 0.55, 0.05), (0.15, 0.65, 0.25), (0.60, 0.25, 0.75), (0.35, 0.35, 0.35),
+])
+assert len(CLASS_COLOURS) == NUM_CLASSES
+_EXTRA = (("class_id", np.uint8, "class"), ("instance_id", np.uint32, "instance"),
+          ("segment_id", np.uint64, "segment"), ("score", np.float32, "score"),
+          ("primitive_id", np.uint8, "primitive"))
+_UPGRADE = {0: 6, 1: 6, 2: 7, 3: 7, 4: 9, 5: 10}
+_CHUNK = 1_000_000
+
+
+def _tmp(path: Path) -> Path:
+    return path.with_name(f".{path.name}.partial")
+
+
+def _require_labels(store: RunStore) -> None:
+    stages = store.attrs.get("stages", {})
+    lab = stages.get("labels")
+    if not lab or lab.get("done") != lab.get("units"):
+        raise PipelineError(f"store {store.url} has no complete labels; run `hollowtree run` first")
+
+
+def _out_header(sources: list[dict[str, Any]]) -> laspy.LasHeader:
+    first = next((s for s in sources if s.get("format") in ("las", "laz", "copc")), None)
+    if first is not None:
+        with laspy.open(first["path"]) as r:
+            src = r.header
+        pf = _UPGRADE.get(src.point_format.id, src.point_format.id)
+        header = laspy.LasHeader(point_format=pf, version="1.4")
+        header.scales, header.offsets = src.scales, src.offsets
+        for dim in src.point_format.extra_dimensions:
+            header.add_extra_dim(laspy.ExtraBytesParams(name=dim.name, type=dim.dtype))
+        crs = src.parse_crs() if hasattr(src, "parse_crs") else None
+        if crs is not None:
+            header.add_crs(crs)
+    else:
+        header = laspy.LasHeader(point_format=7, version="1.4")
+        header.scales = np.array([0.001, 0.001, 0.001])
+        header.offsets = np.array([s for s in (sources[0].get("mins") or (0.0, 0.0, 0.0))])
+    taken = set(header.point_format.dimension_names)
+    for name, dt, _ in _EXTRA:
+        if name in taken:
+            raise ConfigError(f"input {sources[0]['path']} already has a dimension {name!r}; cannot export labels")
+        header.add_extra_dim(laspy.ExtraBytesParams(name=name, type=dt))
+    return header
+
+
+def _labels(store: RunStore, index: np.ndarray) -> dict[str, np.ndarray]:
+    lo, hi = int(index.min()), int(index.max()) + 1
+    return {key: store.read_slice(f"labels/{key}", lo, hi)[index - lo] for _, _, key in _EXTRA}
+
+
+def export_las(store: RunStore, out: str | Path, *, progress: bool = False) -> int:
+    """Write every input point with its labels to ``out`` (.las or .laz); return the count."""
+    from tqdm import tqdm
+
+    _require_labels(store)
+    out = Path(out)
+    if out.suffix.lower() not in (".las", ".laz"):
+        raise ConfigError(f"--las {out}: the file name must end in .las or .laz")
+    if not out.parent.is_dir():
+        raise ConfigError(f"--las {out}: folder {out.parent} does not exist")
+    sources = store.attrs["sources"]
+    header = _out_header(sources)
+    mapping = np.zeros(NUM_CLASSES, dtype=np.uint8)
+    for c, code in LAS_CLASSIFICATION.items():
+        mapping[int(c)] = code
+    tmp = _tmp(out)
+    n_out = 0
+    total = sum(int(s["point_count"]) for s in sources)
+    base = 0
+    with laspy.open(tmp, mode="w", header=header, do_compress=out.suffix.lower() == ".laz") as writer, \
+            tqdm(total=total, unit="pt", unit_scale=True, desc="export: las", disable=not progress, leave=False) as bar:
+        for s in sources:
+            if not Path(s["path"]).is_file():
+                raise PipelineError(f"input {s['path']} of store {store.url} is gone; cannot export")
+            if s.get("format") in ("las", "laz", "copc"):
+                with laspy.open(s["path"]) as r:
+                    names = set(r.header.point_format.dimension_names)
+                    start = 0
+                    for chunk in r.chunk_iterator(_CHUNK):
+                        rec = laspy.ScaleAwarePointRecord.zeros(len(chunk), header=header)
+                        rec.x, rec.y, rec.z = chunk.x, chunk.y, chunk.z
+                        for name in header.point_format.dimension_names:
+                            if name in names and name not in ("X", "Y", "Z", "classification"):
+                                rec[name] = chunk[name]
+                        index = np.arange(base + start, base + start + len(chunk), dtype=np.int64)
+                        _fill(rec, store, index, mapping)
+                        writer.write_points(rec)
+                        start += len(chunk)
+                        n_out += len(chunk)
+                        bar.update(len(chunk))
+            else:
+                for block in read_blocks(s["path"], chunk_size=_CHUNK):
+                    rec = laspy.ScaleAwarePointRecord.zeros(len(block.xyz), header=header)
+                    rec.x, rec.y, rec.z = block.xyz[:, 0], block.xyz[:, 1], block.xyz[:, 2]
+                    if block.intensity is not None:
+                        rec["intensity"] = block.intensity
+                    if block.rgb is not None:
+                        rec["red"], rec["green"], rec["blue"] = block.rgb.T
+                    _fill(rec, store, block.index.astype(np.int64) + base, mapping)
+                    writer.write_points(rec)
+                    n_out += len(block.xyz)
+                    bar.update(len(block.xyz) + block.n_dropped)
+            base += int(s["point_count"])
+    os.replace(tmp, out)
+    return n_out
+
+
+def _fill(rec: Any, store: RunStore, index: np.ndarray, mapping: np.ndarray) -> None:
+    if not len(index):
+        return
+    lab = _labels(store, index)
+    for name, dt, key in _EXTRA:
+        rec[name] = lab[key].astype(dt)
+    rec["classification"] = mapping[lab["class"]]
+
+
+def export_parquet(store: RunStore, folder: str | Path) -> list[Path]:
+    """Copy the segment table (and the tree's node table when the tree ran) to ``folder``."""
+    import fsspec
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    fs, root = fsspec.core.url_to_fs(store.url)
+    root = root.rstrip("/")
+    written = []
+    for rel, name in (("coarse/segments.parquet", "segments.parquet"), ("tree/nodes.parquet", "tree.parquet")):
+        if fs.exists(f"{root}/{rel}"):
+            tmp = _tmp(folder / name)
+            with fs.open(f"{root}/{rel}", "rb") as src, open(tmp, "wb") as dst:
+                shutil.copyfileobj(src, dst)
+            os.replace(tmp, folder / name)
+            written.append(folder / name)
+    if not written:
+        raise PipelineError(f"store {store.url} has no segment table; run the coarse stage first")
+    return written
+
+
+def _sample(store: RunStore, n_max: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """World xyz and class of at most ``n_max`` labelled core points, spread over tiles."""
+    attrs = store.attrs
+    scale, offset = np.asarray(attrs["coords"]["scale"]), np.asarray(attrs["coords"]["offset"])
+    tiles = [int(t) for t in attrs["ingest"]["tiles"]]
+    recs = store.records("ingest")
+    total = max(1, sum(int(recs[str(t)]["n_core"]) for t in tiles))
+    rng = np.random.default_rng(seed)
+    xyz_all, cls_all = [], []
+    for t in tiles:
+        d = store.read_unit(f"tiles/{t}", ["xyz", "core", "index"])
+        core = np.flatnonzero(d["core"])
+        k = min(len(core), int(np.ceil(n_max * len(core) / total)))
+        pick = np.sort(rng.choice(core, size=k, replace=False)) if k < len(core) else core
+        part_index = store.read_slice(f"labels/parts/{t}/index")
+        at = np.searchsorted(part_index, d["index"][pick])
+        cls_all.append(store.read_slice(f"labels/parts/{t}/class")[at])
+        xyz_all.append(d["xyz"][pick] * scale + offset)
+    if not xyz_all:
+        return np.zeros((0, 3)), np.zeros(0, np.uint8)
+    return np.concatenate(xyz_all), np.concatenate(cls_all)
+
+
+def export_png(store: RunStore, out: str | Path, *, n_max: int = 400_000) -> Path:
+    """Top and side views of the labelled points, coloured by class, with a legend."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Patch
+
+    _require_labels(store)
+    out = Path(out)
+    if not out.parent.is_dir():
+        raise ConfigError(f"--png {out}: folder {out.parent} does not exist")
+    xyz, cls = _sample(store, n_max)
+    origin = xyz.min(axis=0) if len(xyz) else np.zeros(3)
+    xyz = xyz - origin  # readable axes: metres from the scan's lower corner
+    colours = CLASS_COLOURS[cls]
+    span = np.ptp(xyz, axis=0) if len(xyz) else np.ones(3)
+    width = 12.0
+    h_top = width * max(span[1], 1e-6) / max(span[0], 1e-6)
+    h_side = width * max(span[2], 1e-6) / max(span[0], 1e-6)
+    fig, (top, side) = plt.subplots(2, 1, figsize=(width, min(24.0, h_top + h_side + 2.0)), dpi=110,
+                                    gridspec_kw={"height_ratios": [max(h_top, 0.5), max(h_side, 0.5)]})
+    order = np.argsort(xyz[:, 2])  # higher points drawn last in the top view
+    top.scatter(xyz[order, 0], xyz[order, 1], c=colours[order], s=0.3, linewidths=0)
+    top.set_aspect("equal")
+    top.set_title(f"top view (origin E {origin[0]:.1f}, N {origin[1]:.1f})")
+    top.set_ylabel("y (m)")
+    order = np.argsort(-xyz[:, 1])  # nearer (smaller y) drawn last in the side view
+    side.scatter(xyz[order, 0], xyz[order, 2], c=colours[order], s=0.3, linewidths=0)
+    side.set_aspect("equal")
+    side.set_title(f"side view, looking north (z from {origin[2]:.1f})")
+    side.set_xlabel("x (m)")
+    side.set_ylabel("z (m)")
+    present = sorted(set(np.unique(cls).tolist()))
+    fig.legend(handles=[Patch(color=CLASS_COLOURS[c], label=CLASS_NAMES[c]) for c in present],
+               loc="lower center", ncol=len(present), frameon=False)
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    tmp = _tmp(out).with_suffix(".png")
+    fig.savefig(tmp)
+    plt.close(fig)
+    os.replace(tmp, out)
+    return out
+
+
+def write_outputs(store: RunStore, wf: Any, *, progress: bool = False) -> Iterator[str]:
+    """Write the outputs a workflow asks for; yield one line per output."""
+    o = wf.outputs
+    if o.las:
+        n = export_las(store, o.las, progress=progress)
+        yield f"outputs: {o.las} ({n:,} points with class_id, instance_id, segment_id, score, primitive_id)"
+    if o.parquet:
+        paths = export_parquet(store, o.parquet)
+        yield f"outputs: {', '.join(str(p) for p in paths)}"
+    if o.png:
+        yield f"outputs: {export_png(store, o.png)}"

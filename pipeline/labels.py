@@ -1,0 +1,199 @@
+"""The labels stage: per input point, in the input's own order, what the run found.
+
+Two phases of Dask tasks, each unit recorded after its data like every other stage:
+
+1. ``labels: tiles`` (one task per tile): the tile's core rows get their coarse primitive
+   and global segment (coarse stage) and their tree leaf, class, instance and score (tree
+   stage, found through the row's CSR position); points dropped by voxel downsampling take
+   their representative's labels (the representative is a core row of the same tile).
+   The rows are sorted by original index and written to ``labels/parts/<tile>``; the
+   record keeps, for every output range, which rows of the part fall in it.
+2. ``labels: ranges`` (one task per range of ``RANGE_ROWS`` input points, whole chunks):
+   the parts' rows of the range are gathered and written to ``labels/<name>`` at their
+   original index. Ranges never share a chunk, so tasks never race.
+
+Arrays written (``docs/store.md``), each of length = the number of input points::
+
+    labels/class      uint8    the class vocabulary (tiling/classes.py); 0 = not labelled
+    labels/instance   uint32   element instance, unique in the store; 0 = none
+    labels/segment    uint64   tree leaf: global coarse segment << 20 | leaf node id; 0 = none
+    labels/score      float32  the classifier's score of the point's class
+    labels/primitive  uint8    coarse primitive (pipeline/coarse.py PRIMITIVE_CODES); 0 = none
+
+Points outside the ingested tiles (a run limited by ``bbox`` or ``tiles``) and points in
+no coarse segment keep 0 everywhere.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from tiling.classes import NUM_CLASSES
+from tiling.errors import PipelineError
+from tiling.store import CHUNK_POINTS, RunStore
+
+__all__ = ["LABEL_DTYPES", "RANGE_ROWS", "LEAF_BITS", "run_labels", "labels_tile", "labels_range", "LabelsReport"]
+
+TILE_STAGE = "labels_tiles"
+STAGE = "labels"
+RANGE_ROWS = 4 * CHUNK_POINTS
+#: ``segment = global coarse segment << LEAF_BITS | tree leaf node id``.
+LEAF_BITS = 20
+LABEL_DTYPES: dict[str, Any] = {
+    "class": np.uint8, "instance": np.uint32, "segment": np.uint64, "score": np.float32, "primitive": np.uint8,
+}
+
+
+def _tree_values(store: RunStore, pos: np.ndarray, tree: dict[str, Any]) -> dict[str, np.ndarray]:
+    """Tree leaf, class, global instance and score at CSR positions ``pos`` (>= 0)."""
+    n = len(pos)
+    out = {"leaf": np.zeros(n, np.uint64), "class": np.zeros(n, np.uint8),
+           "instance": np.zeros(n, np.uint32), "score": np.zeros(n, np.float32)}
+    batches = np.asarray(tree.get("batches", []), dtype=np.int64).reshape(-1, 2)
+    if not n or not len(batches):
+        return out
+    offsets = np.asarray(tree["instance_offsets"], dtype=np.int64)
+    b_of = np.searchsorted(batches[:, 0], pos, side="right") - 1
+    for b in np.unique(b_of).tolist():
+        sel = np.flatnonzero(b_of == b)
+        start, stop = batches[b]
+        local = pos[sel] - start
+        if (local >= stop - start).any():
+            raise PipelineError(f"store {store.url}: tree batch {b} does not cover CSR rows it should")
+        arrays = store.read_unit(f"tree/batches/{b}", ["leaf", "class", "instance", "score"])
+        out["leaf"][sel] = arrays["leaf"][local]
+        out["class"][sel] = arrays["class"][local]
+        inst = arrays["instance"][local].astype(np.int64)
+        out["instance"][sel] = np.where(inst > 0, inst + offsets[b], 0).astype(np.uint32)
+        out["score"][sel] = arrays["score"][local]
+    return out
+
+
+def labels_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, Any]:
+    """Dask task: the labels of one tile's core points (and of their dropped neighbours)."""
+    store = RunStore.open(url, mode="a")
+    pts = store.read_unit(f"tiles/{tile}", ["index", "core"])
+    coarse = store.read_unit(f"coarse/tiles/{tile}", ["primitive", "global", "csr_pos"])
+    core = np.flatnonzero(pts["core"])
+    index = pts["index"][core]
+    glob = coarse["global"][core].astype(np.uint64)
+    pos = coarse["csr_pos"][core]
+    values = {"primitive": coarse["primitive"][core], "class": np.zeros(len(core), np.uint8),
+              "instance": np.zeros(len(core), np.uint32), "score": np.zeros(len(core), np.float32)}
+    leaf = np.zeros(len(core), np.uint64)
+    has = pos >= 0
+    if cfg["tree"] and has.any():
+        tv = _tree_values(store, pos[has], cfg["tree"])
+        leaf[has] = tv["leaf"]
+        for k in ("class", "instance", "score"):
+            values[k][has] = tv[k]
+    values["segment"] = np.where(glob > 0, (glob << np.uint64(LEAF_BITS)) | leaf, 0).astype(np.uint64)
+    # Voxel-dropped points take their representative's labels.
+    if store.has(f"tiles/{tile}/voxel_dropped"):
+        vd = store.read_unit(f"tiles/{tile}", ["voxel_dropped", "voxel_representative"])
+        if len(vd["voxel_dropped"]):
+            order = np.argsort(index)
+            at = order[np.searchsorted(index, vd["voxel_representative"], sorter=order)]
+            if not (index[at] == vd["voxel_representative"]).all():
+                raise PipelineError(f"store {url}: tile {tile} has dropped points without their representative")
+            index = np.concatenate([index, vd["voxel_dropped"]])
+            values = {k: np.concatenate([v, v[at]]) for k, v in values.items()}
+    order = np.argsort(index)
+    index = index[order]
+    part = {"index": index, **{k: values[k][order].astype(LABEL_DTYPES[k]) for k in LABEL_DTYPES}}
+    store.write_unit(f"labels/parts/{tile}", part)
+    bounds = np.arange(0, cfg["n_points"] + RANGE_ROWS, RANGE_ROWS)
+    cuts = np.searchsorted(index, bounds.astype(np.uint64))
+    ranges = {str(r): [int(cuts[r]), int(cuts[r + 1])] for r in range(len(bounds) - 1) if cuts[r + 1] > cuts[r]}
+    info = {"params_hash": cfg["params_hash"], "n_points": int(len(index)), "ranges": ranges}
+    store.record(TILE_STAGE, str(tile), info)
+    return info
+
+
+def labels_range(url: str, r: int, parts: list[tuple[int, int, int]], cfg: dict[str, Any]) -> int:
+    """Dask task: write input points ``[r * RANGE_ROWS, ...)`` of every label array."""
+    store = RunStore.open(url, mode="a")
+    start = r * RANGE_ROWS
+    stop = min(start + RANGE_ROWS, cfg["n_points"])
+    out = {k: np.zeros(stop - start, dtype=dt) for k, dt in LABEL_DTYPES.items()}
+    n = 0
+    for tile, a, b in parts:
+        index = store.read_slice(f"labels/parts/{tile}/index", a, b).astype(np.int64) - start
+        for k in LABEL_DTYPES:
+            out[k][index] = store.read_slice(f"labels/parts/{tile}/{k}", a, b)
+        n += b - a
+    for k, values in out.items():
+        store.write_slice(f"labels/{k}", start, values)
+    counts = np.bincount(out["class"], minlength=NUM_CLASSES)
+    store.record(STAGE, str(r), {"params_hash": cfg["params_hash"], "n_labelled": n,
+                                 "class_counts": counts.tolist()})
+    return n
+
+
+@dataclass(frozen=True, kw_only=True)
+class LabelsReport:
+    store: str
+    n_points: int
+    n_labelled: int
+    tiles_run: int
+    tiles_skipped: int
+    ranges_run: int
+    ranges_skipped: int
+    seconds: float
+
+    def summary(self) -> str:
+        return (f"labels: {self.n_labelled:,} of {self.n_points:,} input points labelled; tiles "
+                f"{self.tiles_run} run, {self.tiles_skipped} skipped; ranges {self.ranges_run} run, "
+                f"{self.ranges_skipped} skipped; {self.seconds:.1f} s")
+
+
+def labels_hash(attrs: dict[str, Any], *, use_tree: bool) -> str:
+    """The labels' parameters hash: that of the stage they are read from."""
+    stages = attrs.get("stages", {})
+    upstream = stages.get("tree" if use_tree else "coarse", {}).get("params_hash")
+    if upstream is None:
+        raise PipelineError(f"the {'tree' if use_tree else 'coarse'} stage has not run on this store")
+    return hashlib.sha256(json.dumps(["labels-v1", upstream, use_tree]).encode()).hexdigest()[:16]
+
+
+def run_labels(url: str, *, use_tree: bool, runner: Any) -> LabelsReport:
+    """Write the per-point label arrays of the store (resumable per tile and range)."""
+    t0 = time.perf_counter()
+    store = RunStore.open(url, mode="a")
+    attrs = store.attrs
+    h = labels_hash(attrs, use_tree=use_tree)
+    n_points = int(sum(int(s["point_count"]) for s in attrs["sources"]))
+    tiles = [int(t) for t in attrs["ingest"]["tiles"]]
+    stages = attrs.get("stages", {})
+    if stages.get(STAGE, {}).get("params_hash") not in (None, h):
+        store.clear_records(TILE_STAGE)
+        store.clear_records(STAGE)
+    cfg = {"params_hash": h, "n_points": n_points, "tree": stages.get("tree") if use_tree else None}
+    done_t = {k: v for k, v in store.records(TILE_STAGE).items() if v.get("params_hash") == h}
+    todo_t = [t for t in tiles if str(t) not in done_t]
+    done_r = {k for k, v in store.records(STAGE).items() if v.get("params_hash") == h}
+    if not done_r:  # first time with these parameters: fresh, zero-filled arrays
+        for k, dt in LABEL_DTYPES.items():
+            store.create_array(f"labels/{k}", shape=(n_points,), dtype=dt)
+    results = runner(labels_tile, [(url, t, cfg) for t in todo_t], "labels: tiles")
+    for t, info in zip(todo_t, results, strict=True):
+        done_t[str(t)] = info
+    parts: dict[int, list[tuple[int, int, int]]] = {}
+    for t in tiles:
+        for r, (a, b) in done_t[str(t)]["ranges"].items():
+            parts.setdefault(int(r), []).append((t, a, b))
+    n_ranges = -(-n_points // RANGE_ROWS)
+    todo_r = [r for r in range(n_ranges) if str(r) not in done_r]
+    runner(labels_range, [(url, r, parts.get(r, []), cfg) for r in todo_r], "labels: ranges")
+    n_labelled = sum(int(done_t[str(t)]["n_points"]) for t in tiles)
+    store.update_attrs({"stages": {**store.attrs.get("stages", {}), STAGE: {
+        "params_hash": h, "units": n_ranges, "done": n_ranges, "tree": use_tree, "n_labelled": n_labelled}}})
+    return LabelsReport(store=url, n_points=n_points, n_labelled=n_labelled, tiles_run=len(todo_t),
+                        tiles_skipped=len(tiles) - len(todo_t), ranges_run=len(todo_r),
+                        ranges_skipped=n_ranges - len(todo_r), seconds=time.perf_counter() - t0)

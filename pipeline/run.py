@@ -1,0 +1,191 @@
+"""``hollowtree run``: one workflow, every stage, resumable, one run per store at a time.
+
+Stages in order: input (a synthetic scan is made on first use) -> ingest -> coarse
+(+ stitch) -> tree (+ HollowNet) -> labels -> outputs. Each stage runs as Dask tasks per
+unit (map chunk, tile, segment batch, output range) on the workflow's cluster, and every
+unit records completion in the store after its data, so a rerun skips what is recorded.
+Parameters are chained: a stage's parameter hash includes the one of the stage before
+it, so changing a parameter redoes exactly that stage and the ones after it; the run
+says which before it starts. The store's workflow parameters are kept in the root
+attribute ``workflow`` for ``hollowtree status``.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.workflow import Workflow
+from tiling.classes import CLASS_NAMES
+
+__all__ = ["run_workflow", "RunReport", "STAGE_ORDER", "changed_stages", "make_synthetic_input"]
+
+#: Stages whose parameters a workflow sets, upstream first.
+STAGE_ORDER = ("ingest", "coarse", "tree", "labels")
+
+
+@dataclass(kw_only=True)
+class RunReport:
+    store: str
+    lines: list[str] = field(default_factory=list)
+    class_counts: dict[str, int] = field(default_factory=dict)
+    nothing_to_do: bool = False
+    seconds: float = 0.0
+
+
+def _stage_params(wf: Workflow) -> dict[str, dict[str, Any]]:
+    """Per stage, the workflow parameters that decide its result."""
+    return {
+        "ingest": {"inputs": [str(p) for p in wf.input.paths()], **wf.ingest.model_dump(mode="json")},
+        "coarse": wf.coarse.model_dump(mode="json"),
+        "tree": wf.tree.model_dump(mode="json"),
+        "labels": {},
+    }
+
+
+def changed_stages(old: dict[str, Any] | None, new: dict[str, dict[str, Any]]) -> tuple[list[str], list[str]]:
+    """The stages to redo because a parameter changed, and what changed.
+
+    >>> old = {"ingest": {"voxel": None}, "coarse": {"epsilon": 0.03}, "tree": {}, "labels": {}}
+    >>> new = {"ingest": {"voxel": None}, "coarse": {"epsilon": 0.05}, "tree": {}, "labels": {}}
+    >>> changed_stages(old, new)
+    (['coarse', 'tree', 'labels'], ['coarse.epsilon: 0.03 -> 0.05'])
+    """
+    if not old:
+        return [], []
+    for i, stage in enumerate(STAGE_ORDER):
+        a, b = old.get(stage, {}), new.get(stage, {})
+        if a != b:
+            diffs = [f"{stage}.{k}: {a.get(k)!r} -> {b.get(k)!r}" for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
+            return list(STAGE_ORDER[i:]), diffs
+    return [], []
+
+
+def make_synthetic_input(wf: Workflow, *, progress: bool) -> Path | None:
+    """Make the workflow's synthetic scan if it names one that does not exist yet."""
+    spec = wf.input.synth
+    if spec is None or spec.path().exists():
+        return None
+    from tqdm import tqdm
+
+    from scenes.synth import synth
+
+    path = spec.path()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    bars: list[Any] = []
+    try:
+        synth(spec.site, path, n_points=spec.points, seed=spec.seed,
+              on_total=lambda n: bars.append(tqdm(total=n, unit="ray", unit_scale=True, leave=False,
+                                                  desc=f"input: scanning {spec.site}", disable=not progress,
+                                                  file=sys.stderr)),
+              on_rays=lambda n: bars[-1].update(n))
+    finally:
+        for bar in bars:
+            bar.close()
+    return path
+
+
+def _class_counts(store: Any) -> dict[str, int]:
+    from pipeline.labels import STAGE as LABELS
+
+    counts = np.zeros(len(CLASS_NAMES), dtype=np.int64)
+    for info in store.records(LABELS).values():
+        counts[: len(info.get("class_counts", []))] += np.asarray(info.get("class_counts", []), dtype=np.int64)
+    return {CLASS_NAMES[i]: int(c) for i, c in enumerate(counts) if c}
+
+
+def _complete(store: Any, wf: Workflow) -> bool:
+    """Whether the store records every stage of ``wf`` as done and its outputs exist."""
+    stages = store.attrs.get("stages", {})
+    needed = ["ingest", "coarse", "labels"] + (["tree"] if wf.tree.enabled else [])
+    if any(stages.get(s, {}).get("done") != stages.get(s, {}).get("units", -1) or s not in stages for s in needed):
+        return False
+    if stages["labels"].get("tree") != wf.tree.enabled:
+        return False
+    return all(Path(p).exists() for p in (wf.outputs.las, wf.outputs.parquet, wf.outputs.png) if p)
+
+
+def run_workflow(
+    wf: Workflow, *, progress: bool = True, say: Callable[[str], None] = print,
+) -> RunReport:
+    """Run every stage of ``wf`` (resuming what the store already records)."""
+    from pipeline.coarse import CoarseParams, run_coarse
+    from pipeline.graph import task_runner
+    from pipeline.labels import run_labels
+    from primitives.ransac import RansacParams
+    from tiling.ingest import IngestParams, ingest
+    from tiling.lock import StoreLock
+    from tiling.store import RunStore, check_writable
+
+    t0 = time.perf_counter()
+    url = wf.store
+    report = RunReport(store=url)
+    check_writable(url)
+    new_params = _stage_params(wf)
+    ip = wf.ingest
+    ingest_params = IngestParams(
+        tile_size=ip.tile_size, tile_points=ip.tile_points, buffer=ip.buffer, voxel=ip.voxel,
+        bbox=ip.bbox, tiles=tuple(ip.tiles) if ip.tiles is not None else None, chunk_size=ip.chunk_size,
+    )
+    cp = wf.coarse
+    coarse_params = CoarseParams(
+        k=cp.k, ransac=RansacParams(epsilon=cp.epsilon, alpha_deg=cp.alpha, min_support=cp.min_support,
+                                    probability=cp.probability, shapes=tuple(cp.shapes)),
+        cluster_epsilon=cp.cluster_epsilon, eps=cp.eps, min_samples=cp.min_samples, seed=cp.seed,
+    )
+    made = make_synthetic_input(wf, progress=progress)
+    if made is not None:
+        say(f"input: made synthetic scan {made}")
+    if "://" not in url:  # the lock lives inside the store folder
+        Path(url).mkdir(parents=True, exist_ok=True)
+    with StoreLock(url):
+        old = RunStore.open(url).attrs.get("workflow") if RunStore.exists(url) else None
+        if old == new_params and _complete(RunStore.open(url), wf):
+            report.nothing_to_do = True
+            report.class_counts = _class_counts(RunStore.open(url))
+            report.lines.append(f"nothing to do: every stage of {url} is recorded with these parameters "
+                                "and the outputs exist")
+            say(report.lines[-1])
+            report.seconds = time.perf_counter() - t0
+            return report
+        redo, diffs = changed_stages(old, new_params)
+        if redo:
+            say(f"parameters changed ({'; '.join(diffs)}): redoing {', '.join(redo)}")
+        with task_runner(wf.cluster.scheduler, workers=wf.cluster.workers, progress=progress) as runner:
+            rep = ingest([str(p) for p in wf.input.paths()], url, ingest_params, runner=runner,
+                         replace="ingest" in redo)
+            RunStore.open(url, mode="a").update_attrs({"workflow": {**(old or {}), "ingest": new_params["ingest"]}})
+            report.lines.append(f"ingest: {rep.n_tiles} tiles, {rep.n_points_in:,} input points; map units "
+                                f"{rep.maps_run} run, {rep.maps_skipped} skipped; tiles {rep.tiles_run} run, "
+                                f"{rep.tiles_skipped} skipped")
+            say(report.lines[-1])
+            crep = run_coarse(url, coarse_params, runner=runner)
+            report.lines.append(f"coarse: {crep.n_segments:,} segments; tiles {crep.tiles_run} run, "
+                                f"{crep.tiles_skipped} skipped")
+            say(report.lines[-1])
+            use_tree = wf.tree.enabled
+            if use_tree:
+                from pipeline.tree_stage import TreeStageParams, run_tree
+
+                trep = run_tree(url, TreeStageParams.from_workflow(wf.tree), runner=runner)
+                report.lines.append(trep.summary())
+                say(report.lines[-1])
+            lrep = run_labels(url, use_tree=use_tree, runner=runner)
+            report.lines.append(lrep.summary())
+            say(report.lines[-1])
+        store = RunStore.open(url, mode="a")
+        store.update_attrs({"workflow": new_params})
+        report.class_counts = _class_counts(store)
+        from pipeline.export import write_outputs
+
+        for line in write_outputs(store, wf, progress=progress):
+            report.lines.append(line)
+            say(line)
+    report.seconds = time.perf_counter() - t0
+    return report

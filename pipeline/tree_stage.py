@@ -1,0 +1,219 @@
+"""The tree stage: the hierarchical tree with HollowNet for every global coarse segment.
+
+Orchestration only (the recursion is ``tree/build.py``, the classifier
+``hollownet/predict.py``). Segments are taken in CSR order and cut into batches of about
+``batch_points`` points: small segments share a batch, a large one is a batch of its own
+and is never split (segment sizes vary by 1000x). One Dask task per batch reads its
+segments' points with one read of ``coarse/csr/xyz``, builds each tree, and writes, after
+its data, its completion record. HollowNet is loaded once per worker process.
+
+Store layout written here (``docs/store.md``)::
+
+    tree/batches/<b>/leaf      uint64 (n,)  node id of each point's leaf (CSR order)
+    tree/batches/<b>/class     uint8  (n,)  class of each point
+    tree/batches/<b>/instance  uint32 (n,)  element instance, numbered within the batch; 0 = none
+    tree/batches/<b>/score     float32(n,)  the classifier's score of the leaf
+    tree/tables/<b>.parquet                 the batch's tree nodes
+    tree/nodes.parquet                      every node of every segment, instances numbered globally
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+from pipeline.coarse import _read_table, _write_table
+from tiling.errors import ConfigError, PipelineError
+from tiling.store import RunStore
+
+__all__ = ["TreeStageParams", "tree_batch", "run_tree", "TreeReport", "plan_batches"]
+
+STAGE = "tree"
+
+
+@dataclass(frozen=True, kw_only=True)
+class TreeStageParams:
+    """Parameters of the tree stage.
+
+    Parameters
+    ----------
+    max_depth : int
+        The paper's ``d``.
+    threshold : float or None
+        A split is kept when ``xi >= threshold``; None = the fitted energy model's.
+    batch_points : int
+        Points per task (small segments are batched; a larger segment is one task).
+    weights : str or None
+        HollowNet weights; None = the shipped default.
+    seed : int
+        Segment ``g`` builds its tree with ``SeedSequence([seed, g])``.
+    """
+
+    max_depth: int = 3
+    threshold: float | None = None
+    batch_points: int = 1_000_000
+    weights: str | None = None
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.max_depth, int) and self.max_depth >= 0):
+            raise ConfigError(f"The 'max_depth' parameter of tree must be an int >= 0. Got {self.max_depth!r} instead.")
+        if not (isinstance(self.batch_points, int) and self.batch_points >= 1):
+            raise ConfigError(f"The 'batch_points' parameter of tree must be an int >= 1. Got {self.batch_points!r} instead.")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_workflow(cls, section: Any) -> TreeStageParams:
+        return cls(max_depth=section.max_depth, threshold=section.threshold, batch_points=section.batch_points,
+                   weights=section.weights, seed=section.seed)
+
+
+def plan_batches(offsets: np.ndarray, batch_points: int) -> list[tuple[int, int]]:
+    """Consecutive segment ranges ``[lo, hi)`` (0-based rows of ``offsets``) of about
+    ``batch_points`` points; a segment larger than that is a range of its own.
+
+    >>> plan_batches(np.array([0, 10, 20, 100, 105, 110]), 25)
+    [(0, 2), (2, 3), (3, 5)]
+    """
+    out: list[tuple[int, int]] = []
+    sizes = np.diff(offsets)
+    lo, acc = 0, 0
+    for g, n in enumerate(sizes.tolist()):
+        if acc and acc + n > batch_points:
+            out.append((lo, g))
+            lo, acc = g, 0
+        acc += n
+    if len(sizes) > lo:
+        out.append((lo, len(sizes)))
+    return out
+
+
+def _worker_threads() -> int | None:
+    """One torch thread inside a Dask worker (its cores are shared with the other
+    workers); the classifier's default in a plain process."""
+    try:
+        from distributed import get_worker
+
+        get_worker()
+    except (ImportError, ValueError):
+        return None
+    return 1
+
+
+_NODE_COLUMNS = ("segment", "node_id", "parent", "depth", "sequence", "e1", "e2", "e3", "e4", "e5", "xi",
+                 "class_id", "score", "n_points", "xmin", "ymin", "zmin", "xmax", "ymax", "zmax",
+                 "is_leaf", "instance")
+
+
+def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any]) -> dict[str, Any]:
+    """Dask task: the trees of global segments ``segs[0] + 1 .. segs[1]`` (one batch)."""
+    from hollownet.predict import Classifier
+    from tree.build import build_tree
+
+    store = RunStore.open(url, mode="a")
+    params = TreeStageParams(**cfg["params"])
+    scale = np.asarray(store.attrs["coords"]["scale"])
+    offsets = store.read_unit("coarse/csr", ["offsets"])["offsets"]
+    lo, hi = int(offsets[segs[0]]), int(offsets[segs[1]])
+    xyz = store.read_slice("coarse/csr/xyz", lo, hi).astype(np.float64) * scale
+    n = hi - lo
+    leaf = np.zeros(n, np.uint64)
+    cls = np.zeros(n, np.uint8)
+    inst = np.zeros(n, np.uint32)
+    score = np.zeros(n, np.float32)
+    clf = Classifier.get(params.weights, num_threads=_worker_threads())
+    cols: dict[str, list[Any]] = {c: [] for c in _NODE_COLUMNS}
+    n_inst = 0
+    for s in range(segs[0], segs[1]):
+        a, z = int(offsets[s]) - lo, int(offsets[s + 1]) - lo
+        pts = xyz[a:z]
+        res = build_tree(pts - pts.mean(axis=0), clf, max_depth=params.max_depth, threshold=params.threshold,
+                         rng=np.random.SeedSequence([params.seed, s + 1]))
+        leaf[a:z] = res.leaf
+        cls[a:z] = res.class_id
+        inst[a:z] = np.where(res.instance > 0, res.instance + n_inst, 0)
+        score[a:z] = res.score
+        node_inst = np.zeros(len(res.nodes), np.int64)
+        node_inst[res.instance_node] = np.arange(1, len(res.instance_node) + 1) + n_inst
+        n_inst += len(res.instance_node)
+        d = res.nodes.to_dict()
+        m = len(res.nodes)
+        cols["segment"] += [s + 1] * m
+        for c in _NODE_COLUMNS[1:]:
+            if c == "instance":
+                cols[c] += node_inst.tolist()
+            elif c in ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax"):
+                j = ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax").index(c)
+                cols[c] += (res.nodes.bbox[:, j] + pts.mean(axis=0)[j % 3]).tolist()
+            else:
+                cols[c] += np.asarray(d[c]).tolist()
+    store.write_unit(f"tree/batches/{b}", {"leaf": leaf, "class": cls, "instance": inst, "score": score})
+    _write_table(store, f"tree/tables/{b}.parquet", pa.table(cols))
+    info = {"params_hash": cfg["params_hash"], "n_segments": segs[1] - segs[0], "n_points": n,
+            "n_nodes": len(cols["segment"]), "n_instances": n_inst, "csr": [lo, hi]}
+    store.record(STAGE, str(b), info)
+    return info
+
+
+@dataclass(frozen=True, kw_only=True)
+class TreeReport:
+    n_segments: int
+    n_batches: int
+    batches_run: int
+    n_nodes: int
+    n_instances: int
+    seconds: float
+
+    def summary(self) -> str:
+        return (f"tree: {self.n_segments:,} segments in {self.n_batches} batches ({self.batches_run} run, "
+                f"{self.n_batches - self.batches_run} skipped); {self.n_nodes:,} nodes, "
+                f"{self.n_instances:,} element instances; {self.seconds:.1f} s")
+
+
+def run_tree(url: str, params: TreeStageParams, *, runner: Any) -> TreeReport:
+    """Run the tree stage on a store whose coarse stage is complete (resumable per batch)."""
+    t0 = time.perf_counter()
+    store = RunStore.open(url, mode="a")
+    attrs = store.attrs
+    stages = attrs.get("stages", {})
+    coarse = stages.get("coarse", {})
+    if not coarse or coarse.get("done") != coarse.get("units"):
+        raise PipelineError(f"store {url}: the coarse stage is not complete; run it first")
+    h = hashlib.sha256(json.dumps([params.to_dict(), coarse["params_hash"], "tree-v1"], sort_keys=True)
+                       .encode()).hexdigest()[:16]
+    cfg = {"params": params.to_dict(), "params_hash": h}
+    if stages.get(STAGE, {}).get("params_hash") not in (None, h):
+        store.clear_records(STAGE)
+    offsets = store.read_unit("coarse/csr", ["offsets"])["offsets"]
+    batches = plan_batches(offsets, params.batch_points)
+    done = {k: v for k, v in store.records(STAGE).items() if v.get("params_hash") == h}
+    todo = [b for b in range(len(batches)) if str(b) not in done]
+    results = runner(tree_batch, [(url, b, batches[b], cfg) for b in todo], "tree: batches")
+    for b, info in zip(todo, results, strict=True):
+        done[str(b)] = info
+    infos = [done[str(b)] for b in range(len(batches))]
+    inst_offsets = np.r_[0, np.cumsum([i["n_instances"] for i in infos])].astype(np.int64)
+    if todo or stages.get(STAGE, {}).get("params_hash") != h:
+        tables = []
+        for b in range(len(batches)):
+            t = _read_table(store, f"tree/tables/{b}.parquet")
+            inst = np.asarray(t.column("instance").to_numpy(), dtype=np.int64)
+            t = t.set_column(t.schema.get_field_index("instance"), "instance",
+                             pa.array(np.where(inst > 0, inst + inst_offsets[b], 0)))
+            tables.append(t)
+        if tables:
+            _write_table(store, "tree/nodes.parquet", pa.concat_tables(tables))
+    n_nodes = sum(int(i["n_nodes"]) for i in infos)
+    store.update_attrs({"stages": {**store.attrs.get("stages", {}), STAGE: {
+        "params_hash": h, "units": len(batches), "done": len(batches), "params": params.to_dict(),
+        "batches": [i["csr"] for i in infos], "instance_offsets": inst_offsets[:-1].tolist()}}})
+    return TreeReport(n_segments=len(offsets) - 1, n_batches=len(batches), batches_run=len(todo),
+                      n_nodes=n_nodes, n_instances=int(inst_offsets[-1]), seconds=time.perf_counter() - t0)

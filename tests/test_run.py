@@ -1,0 +1,255 @@
+"""``hollowtree run`` with real processes: local cluster, a CLI-started Dask cluster, a
+SIGKILLed run, a dying worker, a store on S3 (moto server). Every variant must give
+labels identical to the plain local run of the same workflow."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import laspy
+import numpy as np
+import pytest
+
+from pipeline.export import LAS_CLASSIFICATION
+from pipeline.labels import LABEL_DTYPES
+from tiling.classes import ClassId
+from tiling.lock import StoreLock
+from tiling.store import RunStore
+
+pytestmark = [pytest.mark.slow, pytest.mark.cluster]
+REPO = Path(__file__).resolve().parents[1]
+POINTS = 150_000
+
+
+def _cli(*args: str, env: dict[str, str] | None = None, cwd: Path | None = None, **kw) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "pipeline.cli", *args], capture_output=True, text=True,
+                          env=env, cwd=cwd, **kw)
+
+
+def _workflow(dir_: Path, scan: Path, store: str, *, extra: str = "") -> Path:
+    path = dir_ / f"wf-{abs(hash(store)) % 10**8}.yaml"
+    path.write_text(f"""\
+input:
+  files: [{scan}]
+store: {store}
+ingest: {{tile_size: 50.0, buffer: 2.0}}
+coarse: {{min_support: 300}}
+tree: {{batch_points: 40000}}
+{extra}""")
+    return path
+
+
+def _labels(url: str) -> dict[str, np.ndarray]:
+    store = RunStore.open(url)
+    return {k: store.read_slice(f"labels/{k}") for k in LABEL_DTYPES}
+
+
+def _same(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> None:
+    for k in LABEL_DTYPES:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+
+
+@pytest.fixture(scope="module")
+def scan(tmp_path_factory):
+    from scenes.synth import synth
+
+    path = tmp_path_factory.mktemp("scan") / "wk.laz"
+    synth("wazir_khan", path, n_points=POINTS, seed=3)
+    return path
+
+
+@pytest.fixture(scope="module")
+def reference(scan, tmp_path_factory):
+    """The plain local run (a LocalCluster of 2 processes), with every output."""
+    d = tmp_path_factory.mktemp("ref")
+    store = str(d / "ref.zarr")
+    wf = _workflow(d, scan, store, extra=f"outputs: {{las: {d / 'out.laz'}, parquet: {d / 'tables'}, png: {d / 'v.png'}}}\n")
+    proc = _cli("run", str(wf), "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    return {"store": store, "workflow": wf, "dir": d, "stdout": proc.stdout, "labels": _labels(store)}
+
+
+def test_local_run_labels_every_point(reference, scan):
+    lab = reference["labels"]
+    n = laspy.open(scan).header.point_count
+    assert all(len(v) == n for v in lab.values())
+    # every point of the scan lies in an ingested tile and the run labels its coarse segment
+    seg = lab["segment"]
+    assert (seg > 0).mean() > 0.5
+    assert set(np.unique(lab["class"]).tolist()) <= {int(c) for c in ClassId}
+    assert (lab["class"][seg > 0] > 0).all()
+    assert "class" in reference["stdout"] and "done in" in reference["stdout"]
+
+
+def test_rerun_after_completion_does_nothing(reference):
+    proc = _cli("run", str(reference["workflow"]), "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    assert "nothing to do" in proc.stdout
+
+
+def test_export_las_keeps_input_order_dims_and_labels(reference, scan):
+    out = laspy.read(reference["dir"] / "out.laz")
+    src = laspy.read(scan)
+    assert len(out) == len(src)
+    np.testing.assert_array_equal(out.X * out.header.scales[0] + out.header.offsets[0], src.x)
+    for dim in ("intensity", "gps_time", "gt_class", "gt_instance", "red"):
+        np.testing.assert_array_equal(np.asarray(out[dim]), np.asarray(src[dim]), err_msg=dim)
+    lab = reference["labels"]
+    np.testing.assert_array_equal(np.asarray(out["class_id"]), lab["class"])
+    np.testing.assert_array_equal(np.asarray(out["segment_id"]), lab["segment"])
+    np.testing.assert_array_equal(np.asarray(out["instance_id"]), lab["instance"])
+    mapping = np.array([LAS_CLASSIFICATION[ClassId(c)] for c in range(len(ClassId))])
+    np.testing.assert_array_equal(np.asarray(out.classification), mapping[lab["class"]])
+    assert (reference["dir"] / "tables" / "segments.parquet").is_file()
+    assert (reference["dir"] / "v.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_changed_parameter_redoes_only_downstream(reference, scan, tmp_path):
+    store = str(tmp_path / "c.zarr")
+    wf = _workflow(tmp_path, scan, store)
+    assert _cli("run", str(wf), "--no-progress", "--set", "tree.enabled=false").returncode == 0
+    proc = _cli("run", str(wf), "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    assert "redoing tree, labels" in proc.stdout
+    assert "tiles 0 run" in proc.stdout.split("coarse:")[1].splitlines()[0]  # coarse skipped
+    _same(_labels(store), reference["labels"])
+
+
+def test_second_run_on_a_store_in_use_is_refused(reference):
+    with StoreLock(reference["store"]):
+        proc = _cli("run", str(reference["workflow"]), "--no-progress")
+    assert proc.returncode == 2
+    assert "in use by another run" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_status_reports_every_stage(reference):
+    proc = _cli("status", reference["store"])
+    assert proc.returncode == 0, proc.stderr
+    for stage in ("ingest", "coarse", "tree", "labels"):
+        line = next(x for x in proc.stdout.splitlines() if x.strip().startswith(stage))
+        done, total = line.split()[1].split("/")
+        assert done == total
+
+
+def _wait_for_records(store: Path, stage: str, n: int, proc: subprocess.Popen, timeout: float = 240) -> None:
+    t0 = time.time()
+    while time.time() - t0 < timeout:
+        d = store / "records" / stage
+        if d.is_dir() and sum(1 for _ in d.iterdir()) >= n:
+            return
+        if proc.poll() is not None:
+            pytest.fail(f"the run ended before {n} {stage} records: {proc.stderr.read() if proc.stderr else ''}")
+        time.sleep(0.05)
+    pytest.fail(f"no {n} {stage} records after {timeout} s")
+
+
+def test_sigkill_mid_run_then_resume(reference, scan, tmp_path):
+    store = tmp_path / "k.zarr"
+    wf = _workflow(tmp_path, scan, str(store))
+    proc = subprocess.Popen([sys.executable, "-m", "pipeline.cli", "run", str(wf), "--no-progress"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        _wait_for_records(store, "coarse", 2, proc)
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)  # the run and its local cluster, no cleanup
+        proc.wait()
+    n_done = sum(1 for _ in (store / "records" / "coarse").iterdir())
+    again = _cli("run", str(wf), "--no-progress")
+    assert again.returncode == 0, again.stderr
+    assert "map units 0 run" in again.stdout  # ingest finished before the kill
+    coarse_line = next(x for x in again.stdout.splitlines() if x.startswith("coarse:"))
+    assert f"{n_done} skipped" in coarse_line
+    _same(_labels(str(store)), reference["labels"])
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def dask_cluster(tmp_path):
+    """`dask scheduler` and two `dask worker` processes on 127.0.0.1."""
+    port = _free_port()
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                               "--port", str(port), "--no-dashboard"], env=env, cwd=tmp_path,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)]
+    address = f"tcp://127.0.0.1:{port}"
+    for i in range(2):
+        procs.append(subprocess.Popen(
+            [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1", "--no-nanny",
+             "--no-dashboard", "--name", f"w{i}"], env=env, cwd=tmp_path,
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True))
+    from distributed import Client
+
+    with Client(address, timeout="30s") as c:
+        c.wait_for_workers(2, timeout=60)
+    yield address, procs
+    for p in procs:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+        p.wait()
+
+
+def test_cli_started_dask_cluster_matches_local(reference, scan, tmp_path, dask_cluster):
+    address, _ = dask_cluster
+    store = str(tmp_path / "c.zarr")
+    wf = REPO / "workflows" / "cluster.yaml"
+    proc = _cli("run", str(wf), "--no-progress", "--scheduler", address, "--set", f"input.files=[{scan}]",
+                "--set", f"store={store}", "--set", "ingest.tile_size=50.0", "--set", "coarse.min_support=300",
+                "--set", "tree.batch_points=40000", "--set", f"outputs.parquet={tmp_path / 't'}")
+    assert proc.returncode == 0, proc.stderr
+    _same(_labels(store), reference["labels"])
+
+
+def test_a_worker_dies_mid_run(reference, scan, tmp_path, dask_cluster):
+    address, procs = dask_cluster
+    store = tmp_path / "w.zarr"
+    wf = _workflow(tmp_path, scan, str(store))
+    run = subprocess.Popen([sys.executable, "-m", "pipeline.cli", "run", str(wf), "--no-progress",
+                            "--scheduler", address], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    _wait_for_records(store, "coarse", 1, run)
+    os.killpg(procs[2].pid, signal.SIGKILL)  # one worker process, mid-run
+    out, err = run.communicate(timeout=600)
+    assert run.returncode == 0, err
+    _same(_labels(str(store)), reference["labels"])
+
+
+def test_store_on_s3_moto_server(reference, scan, tmp_path, monkeypatch):
+    pytest.importorskip("moto", reason="moto[server] is a dev dependency")
+    pytest.importorskip("s3fs", reason="s3fs is a dev dependency")
+    port = _free_port()
+    server = subprocess.Popen([sys.executable, "-m", "moto.server", "-H", "127.0.0.1", "-p", str(port)],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    env = dict(os.environ, AWS_ACCESS_KEY_ID="test", AWS_SECRET_ACCESS_KEY="test",
+               AWS_DEFAULT_REGION="us-east-1", AWS_ENDPOINT_URL=f"http://127.0.0.1:{port}")
+    try:
+        for _ in range(100):
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+                break
+            except OSError:
+                time.sleep(0.1)
+        import s3fs
+
+        fs = s3fs.S3FileSystem(key="test", secret="test", endpoint_url=env["AWS_ENDPOINT_URL"])
+        fs.mkdir("hollowtree-test")
+        wf = _workflow(tmp_path, scan, "s3://hollowtree-test/run.zarr")
+        proc = _cli("run", str(wf), "--no-progress", env=env)
+        assert proc.returncode == 0, proc.stderr
+        for k, v in env.items():
+            if k.startswith("AWS_"):
+                monkeypatch.setenv(k, v)
+        arrays = _labels("s3://hollowtree-test/run.zarr")
+        _same(arrays, reference["labels"])
+    finally:
+        server.kill()
+        server.wait()

@@ -1,0 +1,183 @@
+"""Operators of the tree (v1, psi, p, u, h, v2, rho) and the energy terms, on toy data."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tree.energy import e1, e2, e3, e4, e5, energy_terms
+from tree.operators import TransportCurve, fit_circle, fit_ngon, h, p, psi, rho, split_at, u, v1, v2
+from tree.sequences import s1, s2, s3
+
+
+def _ring(rng, *, center=(0.0, 0.0), radius=1.0, n=500, noise=0.0, arc=(0.0, 2 * math.pi)):
+    t = rng.uniform(*arc, n)
+    xy = np.column_stack([center[0] + radius * np.cos(t), center[1] + radius * np.sin(t)])
+    return xy + rng.normal(0.0, noise, xy.shape)
+
+
+def _polygon(rng, *, n_sides, apothem, center, angle, n=800, noise=0.0):
+    r = apothem / math.cos(math.pi / n_sides)
+    a = angle - math.pi / n_sides + 2 * math.pi * np.arange(n_sides) / n_sides  # corners
+    corners = np.column_stack([center[0] + r * np.cos(a), center[1] + r * np.sin(a)])
+    k = rng.integers(0, n_sides, n)
+    s = rng.uniform(0, 1, n)[:, None]
+    xy = corners[k] * (1 - s) + corners[(k + 1) % n_sides] * s
+    return xy + rng.normal(0.0, noise, xy.shape)
+
+
+def test_v1_drops_z_and_leaves_input():
+    xyz = np.arange(12, dtype=float).reshape(4, 3)
+    before = xyz.copy()
+    assert v1(xyz).tolist() == xyz[:, :2].tolist()
+    assert np.array_equal(xyz, before)
+
+
+def test_circle_ransac_recovers_centre_and_radius_with_outliers():
+    rng = np.random.default_rng(1)
+    xy = np.vstack([_ring(rng, center=(3.0, -2.0), radius=4.0, noise=0.01),
+                    rng.uniform(-5, 10, (150, 2))])  # 23 % outliers
+    c = fit_circle(xy, rng=0)
+    assert c
+    assert np.allclose(c.center, (3.0, -2.0), atol=0.01)
+    assert c.radius == pytest.approx(4.0, abs=0.01)
+    assert c.inlier_fraction > 0.7
+
+
+@pytest.mark.parametrize("n_sides", [6, 8])
+def test_ngon_ransac_recovers_polygon(n_sides):
+    rng = np.random.default_rng(2)
+    xy = _polygon(rng, n_sides=n_sides, apothem=2.5, center=(1.0, 1.5), angle=0.3, noise=0.005)
+    g = psi(xy, rng=0)
+    assert g and g.n_sides == n_sides
+    assert np.allclose(g.center, (1.0, 1.5), atol=0.02)
+    assert g.radius == pytest.approx(2.5, abs=0.02)
+    step = 2 * math.pi / n_sides
+    assert abs((g.angle - 0.3 + step / 2) % step - step / 2) < 0.01
+    # Every point of the prism's sides is at the apothem in the polygon's metric.
+    assert np.abs(g.distance(xy) - 2.5).max() < 0.05
+
+
+def test_round_footprint_stays_a_circle():
+    rng = np.random.default_rng(3)
+    c = psi(_ring(rng, radius=2.0, noise=0.005), rng=0)
+    assert c and c.n_sides == 0
+
+
+def test_straight_footprint_has_no_transport_curve():
+    rng = np.random.default_rng(4)
+    x = rng.uniform(-10, 10, 2000)
+    xy = np.column_stack([x, 0.3 * x + rng.normal(0, 0.01, 2000)])
+    assert not psi(xy, rng=0)
+    assert not fit_circle(xy[:2], rng=0)
+
+
+def test_profile_is_distance_from_axis():
+    c = TransportCurve(center=(1.0, 2.0), radius=3.0)
+    xyz = np.array([[4.0, 2.0, 0.5], [1.0, 7.0, 2.0]])
+    assert p(xyz, c).tolist() == [[3.0, 0.5], [5.0, 2.0]]
+
+
+def test_unwarping_gives_arc_length_on_the_curve():
+    rng = np.random.default_rng(5)
+    theta = rng.uniform(math.radians(30), math.radians(150), 400)
+    r = 12.0 + rng.uniform(-0.5, 0.5, 400)  # a 1 m thick curved wall
+    xyz = np.column_stack([r * np.cos(theta), -6.0 + r * np.sin(theta), rng.uniform(0, 5, 400)])
+    c = TransportCurve(center=(0.0, -6.0), radius=12.0)
+    s = u(xyz, c)[:, 0]
+    # Arc length grows with the angle, from the end after the gap, at radius 12.
+    expected = 12.0 * (theta - theta.min())
+    assert np.allclose(np.abs(s - s.min()), expected, atol=1e-9) or np.allclose(
+        s.max() - s, expected, atol=1e-9)
+    assert s.max() - s.min() == pytest.approx(12.0 * (theta.max() - theta.min()))
+
+
+def test_unwarping_a_polygon_runs_along_its_sides():
+    g = TransportCurve(center=(0.0, 0.0), radius=1.0, n_sides=4, angle=0.0)
+    pts = np.array([[1.0, -1.0, 0], [1.0, 0.0, 0], [1.0, 1.0, 0], [0.0, 1.0, 0], [-1.0, 1.0, 0]])
+    s = g.position(pts[:, :2])
+    assert np.allclose(np.diff(s), 1.0)
+    assert g.perimeter == pytest.approx(8.0)
+
+
+def test_h_projects_on_the_principal_plane_of_any_orientation():
+    rng = np.random.default_rng(6)
+    t = rng.uniform(-5, 5, 300)
+    a = math.radians(37)
+    xyz = np.column_stack([t * math.cos(a), t * math.sin(a), rng.uniform(0, 3, 300)])
+    tz = h(xyz)
+    assert np.allclose(np.abs(tz[:, 0] - (t - t.mean()) * np.sign(tz[0, 0] * (t[0] - t.mean()))), 0, atol=1e-9)
+    assert np.array_equal(tz[:, 1], xyz[:, 2])
+
+
+def test_v2_bin_count_follows_zero_crossings():
+    rng = np.random.default_rng(7)
+    centres = [2.0, 5.0, 8.0]
+    x = np.concatenate([rng.normal(c, 0.3, 3000) for c in centres] + [rng.uniform(0, 10, 3000)])
+    hist = v2(x, sigma=2.0)
+    assert hist.n_zero_crossings >= 5  # three peaks, two valleys
+    assert hist.n_bins == hist.n_zero_crossings + 1
+    assert hist.values.sum() > 0
+
+
+@pytest.mark.parametrize("peaks", [[2.0, 5.0, 8.0], [1.3, 6.1]])
+def test_rho_finds_known_peaks_with_refinement(peaks):
+    rng = np.random.default_rng(8)
+    x = np.concatenate([rng.normal(c, 0.15, 4000) for c in peaks] + [rng.uniform(0, 10, 4000)])
+    cuts = rho(v2(x, sigma=1.0), prominence=0.1)
+    assert len(cuts) == len(peaks)
+    assert np.allclose(cuts, peaks, atol=0.1)
+
+
+def test_rho_puts_a_plateau_cut_in_its_middle():
+    """A pier: a plateau with a spike on one edge (its jamb); the cut is the plateau's middle."""
+    rng = np.random.default_rng(9)
+    x = np.concatenate([rng.uniform(0, 10, 2000), rng.uniform(4.0, 5.5, 3000), rng.uniform(4.0, 4.1, 300)])
+    cuts = rho(v2(x, n_fine=100, sigma=0.5))
+    assert len(cuts) == 1 and cuts[0] == pytest.approx(4.75, abs=0.15)
+
+
+def test_flat_signal_has_no_peak():
+    assert len(rho(v2(np.linspace(0, 1, 1000)))) == 0
+
+
+def test_split_at_covers_every_point_once():
+    x = np.random.default_rng(10).uniform(0, 10, 1000)
+    parts = split_at(x, [2.5, 7.0])
+    assert sorted(np.concatenate(parts).tolist()) == list(range(1000))
+    assert [bool(np.all(x[c] < 2.5)) for c in parts[:1]] == [True]
+
+
+def test_sequences_on_toy_shapes():
+    rng = np.random.default_rng(11)
+    # A round tower with two balconies: S1 cuts at both.
+    z = rng.uniform(0, 12, 20000)
+    r = np.where((np.abs(z - 4) < 0.4) | (np.abs(z - 8) < 0.4), 2.0, 1.5) + rng.normal(0, 0.005, 20000)
+    t = rng.uniform(0, 2 * np.pi, 20000)
+    tower = np.column_stack([r * np.cos(t), r * np.sin(t), z])
+    prop = s1(tower, rng=0)
+    assert prop is not None and prop.n_children == 3
+    assert np.allclose(prop.cuts, [4.0, 8.0], atol=0.3)
+    # A straight wall has no transport curve: S1 and S3 propose nothing.
+    wall = np.column_stack([rng.uniform(0, 20, 5000), rng.normal(0, 0.01, 5000), rng.uniform(0, 5, 5000)])
+    assert s1(wall, rng=0) is None and s3(wall, rng=0) is None
+    # Too few points: no proposal, no crash.
+    assert s2(wall[:3]) is None and s1(wall[:1], rng=0) is None
+
+
+# --------------------------------------------------------------------------- energy
+def test_energy_terms_as_method_md_writes_them():
+    assert e1([10, 10, 10]) == 1.0
+    assert e1([1, 29]) == pytest.approx(0.0)
+    assert e1([5, 10, 15]) == pytest.approx(1 - np.std([5, 10, 15]) / np.std([1, 29]))
+    assert e2(50, 100) == 0.5 and e2(500, 100) == 1.0
+    assert e3(1) == 0.0 and e3(2) == pytest.approx(1 - math.exp(-0.5))
+    W = np.arange(27, dtype=float).reshape(9, 3) / 27
+    assert e4(W, 6, 1) == W[6, 0] and e4(W, 4, 3) == W[4, 2]
+    assert e5([0.2, 0.4, 0.9]) == pytest.approx(0.5)
+    e = energy_terms([10, 20], n_min=100, prior=W, parent_class=6, sequence=2, scores=[0.5, 1.0])
+    assert e.tolist() == pytest.approx([e1([10, 20]), 0.3, e3(2), W[6, 1], 0.75])
+    with pytest.raises(ValueError, match="sequence"):
+        e4(W, 6, 4)

@@ -1,0 +1,108 @@
+"""Workflow files: every shipped one loads, bad ones fail before anything runs."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from pipeline.run import changed_stages
+from pipeline.workflow import Workflow, WorkflowError, load_workflow, schema_text
+
+REPO = Path(__file__).resolve().parents[1]
+WORKFLOWS = sorted((REPO / "workflows").glob("*.yaml"))
+
+
+@pytest.mark.parametrize("path", WORKFLOWS, ids=[p.name for p in WORKFLOWS])
+def test_shipped_workflows_load(path):
+    wf = load_workflow(path, check_files=False)
+    assert isinstance(wf, Workflow)
+    assert wf.store
+
+
+def test_shipped_set_is_complete():
+    assert {p.name for p in WORKFLOWS} >= {"local.yaml", "laptop.yaml", "cluster.yaml"}
+
+
+def test_schema_file_is_current():
+    assert (REPO / "workflows" / "schema.json").read_text() == schema_text(), (
+        "workflows/schema.json is stale: regenerate with `hollowtree run --schema > workflows/schema.json`")
+    schema = json.loads(schema_text())
+    assert set(schema["properties"]) == set(Workflow.model_fields)
+
+
+def _write(tmp_path: Path, text: str) -> Path:
+    p = tmp_path / "wf.yaml"
+    p.write_text(text)
+    return p
+
+
+GOOD = """\
+input:
+  synth: {site: wazir_khan, points: 1000}
+store: STORE
+coarse:
+  epsilon: 0.03
+"""
+
+
+@pytest.mark.parametrize(("text", "overrides", "expected"), [
+    (GOOD.replace("  epsilon: 0.03", "  epsilonn: 0.03"), [],
+     r"wf.yaml:5: coarse.epsilonn: unknown key \(did you mean 'epsilon'\?\)"),
+    (GOOD.replace("  epsilon: 0.03", "  epsilon: fast"), [], r"wf.yaml:5: coarse.epsilon: .*number.*'fast'"),
+    (GOOD.replace("  epsilon: 0.03", "  epsilon: -1"), [], r"wf.yaml:5: coarse.epsilon: .*greater than 0.*-1"),
+    (GOOD.replace("points: 1000", "points: 0"), [], r"wf.yaml:2: input.synth.points: .*greater than or equal to 1"),
+    (GOOD.replace("synth: {site: wazir_khan, points: 1000}", "files: [nope.laz]"), [],
+     r"wf.yaml:2: input.files\[0\]: file nope.laz does not exist"),
+    (GOOD.replace("store: STORE\n", ""), [], r"wf.yaml:1: store: required key is missing"),
+    (GOOD + "clustr: {}\n", [], r"wf.yaml:6: clustr: unknown key \(did you mean 'cluster'\?\)"),
+    (GOOD, ["cluster.workers=two"], r"wf.yaml: cluster.workers: .*integer.*\(from --set cluster.workers=two\)"),
+    (GOOD, ["ingest.buffer=-2"], r"ingest.buffer: .*greater than or equal to 0.*--set ingest.buffer=-2"),
+    (GOOD.replace("synth: {site: wazir_khan, points: 1000}", "synth: {site: atlantis}"), [],
+     r"wf.yaml:2: input.synth.site: .*unknown site 'atlantis'"),
+    ("input: [\n", [], r"wf.yaml:2: not valid YAML"),
+    ("- a\n- b\n", [], r"wf.yaml:1: a workflow is a mapping"),
+])
+def test_bad_workflows_name_file_key_and_line(tmp_path, text, overrides, expected):
+    path = _write(tmp_path, text.replace("STORE", str(tmp_path / "s.zarr")))
+    with pytest.raises(WorkflowError, match=expected) as info:
+        load_workflow(path, overrides)
+    assert "\n" not in str(info.value)
+
+
+def test_missing_workflow_file(tmp_path):
+    with pytest.raises(WorkflowError, match=r"nope.yaml: workflow file does not exist"):
+        load_workflow(tmp_path / "nope.yaml")
+
+
+def test_overrides_apply(tmp_path):
+    path = _write(tmp_path, GOOD.replace("STORE", str(tmp_path / "s.zarr")))
+    wf = load_workflow(path, ["coarse.epsilon=0.05", "tree.enabled=false", "ingest.bbox=[0, 0, 1, 1]"])
+    assert wf.coarse.epsilon == 0.05
+    assert wf.tree.enabled is False
+    assert wf.ingest.bbox == (0.0, 0.0, 1.0, 1.0)
+
+
+def test_cli_bad_workflow_exits_2_and_writes_nothing(tmp_path):
+    store = tmp_path / "s.zarr"
+    path = _write(tmp_path, GOOD.replace("STORE", str(store)).replace("epsilon: 0.03", "epsilon: 0"))
+    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "run", str(path)],
+                          capture_output=True, text=True, cwd=tmp_path)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "coarse.epsilon" in lines[0] and ":5:" in lines[0]
+    assert not store.exists()
+    assert list(tmp_path.iterdir()) == [path]
+
+
+def test_changed_stages_names_the_first_changed_stage_and_all_after():
+    base = {"ingest": {"voxel": None}, "coarse": {"k": 16}, "tree": {"max_depth": 3}, "labels": {}}
+    assert changed_stages(base, base) == ([], [])
+    assert changed_stages(None, base) == ([], [])
+    redo, diffs = changed_stages(base, {**base, "tree": {"max_depth": 4}})
+    assert redo == ["tree", "labels"] and diffs == ["tree.max_depth: 3 -> 4"]
+    redo, _ = changed_stages(base, {**base, "ingest": {"voxel": 0.05}})
+    assert redo == ["ingest", "coarse", "tree", "labels"]

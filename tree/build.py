@@ -1,0 +1,274 @@
+"""Algorithm 1 of the paper: the greedy hierarchical tree of one coarse segment.
+
+At every node the three sequences propose splits (:func:`tree.sequences.propose`); the
+classifier scores every proposal's children; each proposal gets ``xi = w . e``
+(:mod:`tree.energy`); the best is kept if ``xi >= threshold`` and the recursion goes on in
+its children down to ``max_depth``. An explicit stack replaces the paper's recursion.
+
+Element instances (``../shared/METHOD.md``, "Classes"): the largest node whose class is an
+element class (arch, dome, minaret, pillar) and whose ancestors are not; every point below
+it takes its class and instance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from tiling.classes import ELEMENT_CLASSES
+from tree.energy import Classifier, EnergyModel, energy_terms, load_energy_model
+from tree.operators import RngLike
+from tree.sequences import Proposal, SequenceParams, propose
+
+__all__ = ["NodeTable", "TreeResult", "build_tree"]
+
+IntArray = npt.NDArray[np.int64]
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class NodeTable:
+    """The nodes of one tree as parallel arrays (sklearn's ``tree_``), in creation order.
+
+    Attributes
+    ----------
+    node_id : ndarray of int64, shape (n_nodes,)
+        0..n_nodes-1; the root is 0.
+    parent : ndarray of int64
+        -1 for the root.
+    depth : ndarray of int64
+    sequence : ndarray of int8
+        The sequence (1, 2, 3) whose split produced the node; 0 for the root.
+    terms : ndarray of float64, shape (n_nodes, 5)
+        e1..e5 of the split that produced the node (NaN for the root).
+    xi : ndarray of float64
+        ``w . e`` of that split (NaN for the root).
+    class_id : ndarray of uint8
+    score : ndarray of float32
+    n_points : ndarray of int64
+    bbox : ndarray of float64, shape (n_nodes, 6)
+        ``xmin, ymin, zmin, xmax, ymax, zmax``.
+    is_leaf : ndarray of bool
+    """
+
+    node_id: IntArray
+    parent: IntArray
+    depth: IntArray
+    sequence: npt.NDArray[np.int8]
+    terms: FloatArray
+    xi: FloatArray
+    class_id: npt.NDArray[np.uint8]
+    score: npt.NDArray[np.float32]
+    n_points: IntArray
+    bbox: FloatArray
+    is_leaf: npt.NDArray[np.bool_]
+
+    def __len__(self) -> int:
+        return len(self.node_id)
+
+    def children(self, node: int) -> IntArray:
+        """Ids of the children of ``node``."""
+        return np.flatnonzero(self.parent == node).astype(np.int64)
+
+    def to_dict(self) -> dict[str, npt.NDArray[Any]]:
+        """Flat columns (one per energy term and bbox side), ready for a Parquet table."""
+        cols: dict[str, npt.NDArray[Any]] = {
+            "node_id": self.node_id, "parent": self.parent, "depth": self.depth,
+            "sequence": self.sequence,
+        }
+        for k in range(5):
+            cols[f"e{k + 1}"] = self.terms[:, k]
+        cols |= {"xi": self.xi, "class_id": self.class_id, "score": self.score,
+                 "n_points": self.n_points, "is_leaf": self.is_leaf}
+        for k, name in enumerate(["xmin", "ymin", "zmin", "xmax", "ymax", "zmax"]):
+            cols[name] = self.bbox[:, k]
+        return cols
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class TreeResult:
+    """The tree of one segment and what it says about each point.
+
+    Attributes
+    ----------
+    nodes : NodeTable
+    leaf : ndarray of int64, shape (n_points,)
+        Node id of each point's leaf.
+    class_id : ndarray of uint8, shape (n_points,)
+        The element instance's class inside an element instance, else the leaf's class.
+    instance : ndarray of int64, shape (n_points,)
+        Element instance within this segment, 1..M; 0 outside every element instance
+        (planar classes and ``other``: the caller makes them one instance per segment).
+    score : ndarray of float32, shape (n_points,)
+        The leaf's classification score.
+    instance_node : ndarray of int64, shape (M,)
+        Node id of each element instance (``instance_node[i - 1]`` for instance ``i``).
+    """
+
+    nodes: NodeTable
+    leaf: IntArray
+    class_id: npt.NDArray[np.uint8]
+    instance: IntArray
+    score: npt.NDArray[np.float32]
+    instance_node: IntArray
+
+
+def _bbox(xyz: FloatArray) -> FloatArray:
+    if len(xyz) == 0:
+        return np.full(6, np.nan)
+    return np.r_[xyz.min(axis=0), xyz.max(axis=0)]
+
+
+def _classify(classifier: Classifier, parts: list[FloatArray]) -> tuple[IntArray, FloatArray]:
+    cls, score, _ = classifier.predict(parts)
+    return np.asarray(cls, dtype=np.int64).reshape(-1), np.asarray(score, dtype=np.float64).reshape(-1)
+
+
+def build_tree(
+    xyz: npt.ArrayLike,
+    classifier: Classifier,
+    *,
+    model: EnergyModel | None = None,
+    max_depth: int = 3,
+    threshold: float | None = None,
+    params: SequenceParams | None = None,
+    rng: RngLike = None,
+) -> TreeResult:
+    """Build the hierarchical tree of one segment (Algorithm 1).
+
+    Parameters
+    ----------
+    xyz : array-like of shape (n_points, 3)
+        The segment's points (float64, local metres preferred: subtract an origin from
+        UTM coordinates first).
+    classifier : Classifier
+        ``predict(list of (n_i, 3) arrays) -> (class_ids, scores, probabilities)``.
+    model : EnergyModel, optional
+        ``w``, ``W``, ``Nmin`` and the threshold; default the package's ``energy-v1.json``.
+    max_depth : int
+        The paper's ``d``: nodes at this depth are not split.
+    threshold : float, optional
+        Overrides ``model.threshold``.
+    params : SequenceParams, optional
+    rng : int, Generator or None
+        Seeds the RANSAC fits: one base seed is drawn from it and node ``i`` uses
+        ``SeedSequence([base, i])``, so the same input and seed give the same tree.
+
+    Returns
+    -------
+    TreeResult
+
+    Notes
+    -----
+    Memory: the points once, one index array per live node, and the proposals of one
+    node at a time (three sets of child indices, O(n_points)).
+
+    Examples
+    --------
+    >>> class Const:  # a stand-in classifier: everything is "wall" with score 0.5
+    ...     def predict(self, segments):
+    ...         n = len(segments)
+    ...         return np.full(n, 2), np.full(n, 0.5), np.full((n, 9), 1 / 9)
+    >>> r = build_tree(np.zeros((3, 3)), Const())
+    >>> len(r.nodes), r.leaf.tolist(), r.instance.tolist()
+    (1, [0, 0, 0], [0, 0, 0])
+    """
+    a = np.asarray(xyz, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ValueError(f"The 'xyz' parameter of build_tree must be an array of shape (n_points, 3). "
+                         f"Got shape {a.shape} instead.")
+    if max_depth < 0:
+        raise ValueError(f"The 'max_depth' parameter of build_tree must be an int >= 0. Got {max_depth} instead.")
+    model = model if model is not None else load_energy_model()
+    thr = model.threshold if threshold is None else float(threshold)
+    params = params or SequenceParams()
+    base = int(np.random.default_rng(rng).integers(2**62))  # per-node seeds below
+    prior = model.W
+
+    n = len(a)
+    cls0, sc0 = _classify(classifier, [a]) if n else (np.array([0]), np.array([0.0]))
+    parent, depth, seq, xi, cls, score, npts = [-1], [0], [0], [np.nan], [int(cls0[0])], [float(sc0[0])], [n]
+    terms: list[FloatArray] = [np.full(5, np.nan)]
+    bbox = [_bbox(a)]
+    leaf_of = np.zeros(n, dtype=np.int64)
+    is_leaf = [True]
+    stack: list[tuple[int, IntArray]] = [(0, np.arange(n, dtype=np.int64))]
+    while stack:
+        node, idx = stack.pop()
+        if depth[node] >= max_depth or len(idx) < max(params.min_points, 2):
+            continue
+        pts = a[idx]
+        node_rng = np.random.default_rng(np.random.SeedSequence([base, node]))
+        props = [pr for pr in propose(pts, params=params, rng=node_rng).values() if pr is not None]
+        if not props:
+            continue
+        parts = [pts[c] for pr in props for c in pr.children]
+        all_cls, all_sc = _classify(classifier, parts)
+        best: tuple[float, Proposal, FloatArray, IntArray, FloatArray] | None = None
+        k = 0
+        for pr in props:
+            s = pr.n_children
+            c_cls, c_sc = all_cls[k:k + s], all_sc[k:k + s]
+            k += s
+            e = energy_terms([len(c) for c in pr.children], n_min=model.n_min, prior=prior,
+                             parent_class=cls[node], sequence=pr.sequence, scores=c_sc)
+            x = model.xi(e)
+            if best is None or x > best[0]:
+                best = (x, pr, e, c_cls, c_sc)
+        assert best is not None
+        x, pr, e, c_cls, c_sc = best
+        if not x >= thr:
+            continue
+        is_leaf[node] = False
+        for j, child in enumerate(pr.children):
+            cid = len(parent)
+            gidx = idx[child]
+            parent.append(node)
+            depth.append(depth[node] + 1)
+            seq.append(pr.sequence)
+            terms.append(e)
+            xi.append(x)
+            cls.append(int(c_cls[j]))
+            score.append(float(c_sc[j]))
+            npts.append(len(gidx))
+            bbox.append(_bbox(a[gidx]))
+            is_leaf.append(True)
+            leaf_of[gidx] = cid
+            stack.append((cid, gidx))
+    m = len(parent)
+    nodes = NodeTable(
+        node_id=np.arange(m, dtype=np.int64), parent=np.asarray(parent, dtype=np.int64),
+        depth=np.asarray(depth, dtype=np.int64), sequence=np.asarray(seq, dtype=np.int8),
+        terms=np.vstack(terms), xi=np.asarray(xi, dtype=np.float64),
+        class_id=np.asarray(cls, dtype=np.uint8), score=np.asarray(score, dtype=np.float32),
+        n_points=np.asarray(npts, dtype=np.int64), bbox=np.vstack(bbox),
+        is_leaf=np.asarray(is_leaf, dtype=bool))
+    return _per_point(nodes, leaf_of)
+
+
+def _per_point(nodes: NodeTable, leaf_of: IntArray) -> TreeResult:
+    """Per-point class, instance and score from the leaves and the element instances."""
+    m = len(nodes)
+    element = np.isin(nodes.class_id, np.asarray([int(c) for c in ELEMENT_CLASSES]))
+    owner = np.full(m, -1, dtype=np.int64)  # element-instance node of each node, or -1
+    inst_nodes: list[int] = []
+    for i in range(m):  # parents come before children (creation order)
+        par = int(nodes.parent[i])
+        if par >= 0 and owner[par] >= 0:
+            owner[i] = owner[par]
+        elif element[i]:
+            owner[i] = i
+            inst_nodes.append(i)
+    inst_of_node = np.zeros(m, dtype=np.int64)
+    for k, i in enumerate(inst_nodes):
+        inst_of_node[i] = k + 1
+    point_owner = owner[leaf_of]
+    inside = point_owner >= 0
+    instance = np.where(inside, inst_of_node[np.maximum(point_owner, 0)], 0)
+    class_id = np.where(inside, nodes.class_id[np.maximum(point_owner, 0)], nodes.class_id[leaf_of])
+    return TreeResult(nodes=nodes, leaf=leaf_of, class_id=class_id.astype(np.uint8),
+                      instance=instance.astype(np.int64), score=nodes.score[leaf_of].astype(np.float32),
+                      instance_node=np.asarray(inst_nodes, dtype=np.int64))

@@ -1,0 +1,677 @@
+"""The paper's projection operators: ``v1``, ``psi``, ``p``, ``u``, ``h``, ``v2``, ``rho``.
+
+Each operator is a pure NumPy/SciPy function (``../shared/METHOD.md``, "Operators"):
+
+- :func:`v1` drops z and keeps the footprint ``(x, y)``;
+- :func:`psi` fits the transport curve to the footprint: circle RANSAC, then regular
+  n-gon RANSAC (octagonal minarets, bastions) seeded by the circle; a straight footprint
+  has no transport curve and gives a falsy :class:`~primitives.shapes.FailedFit`;
+- :func:`p` is the profile curve (distance from the curve's axis, height);
+- :func:`u` un-warps along the curve (arc length, height);
+- :func:`h` projects on the dominant vertical plane (principal horizontal axis, height);
+- :func:`v2` is the limited-bin histogram whose bin count is the number of zero crossings
+  of the derivative of a fine, lightly smoothed histogram;
+- :func:`rho` finds the histogram's peaks (``scipy.signal.find_peaks``) and refines each
+  inside its bin on the fine histogram; the refined peaks are the cut positions.
+
+The sequences ``S1``, ``S2`` and ``S3`` that chain them are in :mod:`tree.sequences`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+from scipy.ndimage import gaussian_filter1d
+from scipy.signal import find_peaks
+
+from primitives.shapes import FailedFit
+
+__all__ = [
+    "Histogram",
+    "TransportCurve",
+    "fit_circle",
+    "fit_ngon",
+    "h",
+    "p",
+    "psi",
+    "rho",
+    "split_at",
+    "u",
+    "v1",
+    "v2",
+]
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+RngLike = int | np.random.Generator | np.random.SeedSequence | None
+
+#: Polygons tried by :func:`psi` after the circle (square, hexagonal, octagonal plans).
+DEFAULT_SIDES: tuple[int, ...] = (4, 6, 8)
+#: Points used to score RANSAC hypotheses (the final fit uses every point).
+_SCORE_SAMPLE = 4096
+
+
+# --------------------------------------------------------------------------- v1, h
+def v1(xyz: npt.ArrayLike) -> FloatArray:
+    """Vertical projection ``v1``: drop z, keep the footprint.
+
+    Parameters
+    ----------
+    xyz : array-like of shape (n_points, 3)
+
+    Returns
+    -------
+    xy : ndarray of shape (n_points, 2), float64
+
+    Examples
+    --------
+    >>> v1([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]).tolist()
+    [[1.0, 2.0], [4.0, 5.0]]
+    """
+    return np.array(np.asarray(xyz, dtype=np.float64)[:, :2])
+
+
+def h(xyz: npt.ArrayLike) -> FloatArray:
+    """Projection ``h`` on the dominant vertical plane: ``(t, z)``.
+
+    ``t`` is the coordinate along the principal axis of the footprint (PCA of ``x, y``),
+    measured from the footprint's centroid, so a straight wall of any orientation lies
+    along ``t``. The paper zeroes the y axis; this is the same for a wall along x.
+
+    Parameters
+    ----------
+    xyz : array-like of shape (n_points, 3)
+
+    Returns
+    -------
+    tz : ndarray of shape (n_points, 2), float64
+
+    Examples
+    --------
+    >>> xyz = [[0, 0, 0], [1, 1, 1], [2, 2, 0], [3, 3, 1], [4, 4, 0], [5, 5, 1]]
+    >>> np.round(np.abs(h(xyz)[:, 0]), 3).tolist()
+    [3.536, 2.121, 0.707, 0.707, 2.121, 3.536]
+    """
+    a = np.asarray(xyz, dtype=np.float64)
+    xy = a[:, :2] - a[:, :2].mean(axis=0) if len(a) else a[:, :2]
+    axis = np.array([1.0, 0.0])
+    if len(a) >= 2:
+        w, vecs = np.linalg.eigh(xy.T @ xy)
+        axis = vecs[:, int(np.argmax(w))]
+        # Fixed sign, so equal input gives an equal projection.
+        if axis[np.argmax(np.abs(axis))] < 0:
+            axis = -axis
+    return np.stack([xy @ axis, a[:, 2]], axis=1)
+
+
+# --------------------------------------------------------------------------- psi
+@dataclass(frozen=True, kw_only=True)
+class TransportCurve:
+    """A circle or a regular polygon in the horizontal plane: the transport curve.
+
+    Attributes
+    ----------
+    center : tuple of 2 floats
+    radius : float
+        Circle radius, or the polygon's apothem (centre to the middle of a side).
+    n_sides : int
+        0 for a circle, otherwise the number of sides of the regular polygon.
+    angle : float
+        Polygon only: direction (radians) of the outward normal of one side.
+    inlier_fraction : float
+        Share of the footprint within the residual threshold of the curve.
+    rms : float
+        Root mean square residual of the inliers, metres.
+    """
+
+    center: tuple[float, float]
+    radius: float
+    n_sides: int = 0
+    angle: float = 0.0
+    inlier_fraction: float = 1.0
+    rms: float = 0.0
+
+    def _polar(self, xy: FloatArray) -> tuple[FloatArray, FloatArray]:
+        d = np.asarray(xy, dtype=np.float64) - np.asarray(self.center)
+        return np.hypot(d[:, 0], d[:, 1]), np.arctan2(d[:, 1], d[:, 0])
+
+    def _face_angle(self, theta: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Side index and the angle from that side's normal, in [-pi/n, pi/n)."""
+        step = 2.0 * math.pi / self.n_sides
+        rel = np.mod(theta - self.angle + 0.5 * step, 2.0 * math.pi)
+        k = np.floor(rel / step)
+        return k, rel - k * step - 0.5 * step
+
+    def distance(self, xy: npt.ArrayLike) -> FloatArray:
+        """Distance of each point from the axis in the curve's own metric.
+
+        A circle gives the Euclidean distance from the centre; a polygon the distance
+        along the nearest side's normal, so every point of a prism's side has the same
+        distance (the apothem).
+        """
+        r, theta = self._polar(np.asarray(xy, dtype=np.float64))
+        if self.n_sides == 0:
+            return r
+        _, phi = self._face_angle(theta)
+        return np.asarray(r * np.cos(phi))
+
+    def position(self, xy: npt.ArrayLike) -> FloatArray:
+        """Position along the curve, metres from the angle 0 (circle) or from the start of
+        side 0 (polygon); in ``[0, perimeter)``."""
+        _, theta = self._polar(np.asarray(xy, dtype=np.float64))
+        if self.n_sides == 0:
+            return np.asarray(np.mod(theta, 2.0 * math.pi) * self.radius)
+        t = math.tan(math.pi / self.n_sides)
+        k, phi = self._face_angle(theta)
+        return np.asarray(self.radius * (2.0 * t * k + t + np.tan(phi)))
+
+    @property
+    def perimeter(self) -> float:
+        if self.n_sides == 0:
+            return 2.0 * math.pi * self.radius
+        return 2.0 * self.n_sides * self.radius * math.tan(math.pi / self.n_sides)
+
+    def residuals(self, xy: npt.ArrayLike) -> FloatArray:
+        return np.abs(self.distance(xy) - self.radius)
+
+
+def _circles_through(a: FloatArray, b: FloatArray, c: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Centres (m, 2) and radii (m,) of the circles through triples of points (NaN if collinear)."""
+    bx, by = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
+    cx, cy = c[:, 0] - a[:, 0], c[:, 1] - a[:, 1]
+    det = 2.0 * (bx * cy - by * cx)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ux = (cy * (bx**2 + by**2) - by * (cx**2 + cy**2)) / det
+        uy = (bx * (cx**2 + cy**2) - cx * (bx**2 + by**2)) / det
+    return np.stack([ux + a[:, 0], uy + a[:, 1]], axis=1), np.hypot(ux, uy)
+
+
+def _kasa(xy: FloatArray) -> tuple[FloatArray, float]:
+    """Algebraic least-squares circle (Kasa), then a few Gauss-Newton steps on the
+    geometric residual."""
+    m = xy.mean(axis=0)
+    q = xy - m
+    a = np.column_stack([q, np.ones(len(q))])
+    b = (q**2).sum(axis=1)
+    sol = np.linalg.lstsq(a, b, rcond=None)[0]
+    c = 0.5 * sol[:2]
+    r = math.sqrt(max(sol[2] + c @ c, 1e-300))
+    for _ in range(5):
+        d = q - c
+        rr = np.hypot(d[:, 0], d[:, 1])
+        ok = rr > 1e-12
+        jac = np.column_stack([-d[ok] / rr[ok, None], -np.ones(int(ok.sum()))])
+        res = rr[ok] - r
+        step = np.linalg.lstsq(jac, -res, rcond=None)[0]
+        c, r = c + step[:2], r + float(step[2])
+        if np.abs(step).max() < 1e-9:
+            break
+    return c + m, abs(r)
+
+
+def _threshold(xy: FloatArray, residual_threshold: float | None) -> float:
+    if residual_threshold is not None:
+        return float(residual_threshold)
+    extent = float(np.hypot(*(xy.max(axis=0) - xy.min(axis=0)))) if len(xy) else 0.0
+    return max(0.02, 0.01 * extent)
+
+
+def fit_circle(
+    xy: npt.ArrayLike,
+    *,
+    residual_threshold: float | None = None,
+    max_trials: int = 256,
+    rng: RngLike = None,
+) -> TransportCurve | FailedFit:
+    """Circle RANSAC on a footprint: 3-point hypotheses, the one with most inliers, refit.
+
+    Parameters
+    ----------
+    xy : array-like of shape (n_points, 2)
+    residual_threshold : float, optional
+        Inlier distance, metres; default 1 % of the footprint's diagonal, at least 2 cm.
+    max_trials : int
+        Hypotheses drawn.
+    rng : int, Generator or None
+
+    Returns
+    -------
+    TransportCurve or FailedFit
+
+    Examples
+    --------
+    >>> t = np.linspace(0, 2 * np.pi, 6, endpoint=False)
+    >>> xy = np.column_stack([1 + 2 * np.cos(t), -1 + 2 * np.sin(t)])
+    >>> c = fit_circle(xy, rng=0)
+    >>> np.round(c.center, 6).tolist(), round(c.radius, 6)
+    ([1.0, -1.0], 2.0)
+    """
+    pts = np.asarray(xy, dtype=np.float64)
+    if len(pts) < 3:
+        return FailedFit(reason=f"a circle needs 3 points; got {len(pts)}")
+    rng = np.random.default_rng(rng)
+    thr = _threshold(pts, residual_threshold)
+    score = pts if len(pts) <= _SCORE_SAMPLE else pts[rng.choice(len(pts), _SCORE_SAMPLE, replace=False)]
+    idx = rng.integers(0, len(pts), size=(max_trials, 3))
+    centres, radii = _circles_through(pts[idx[:, 0]], pts[idx[:, 1]], pts[idx[:, 2]])
+    ok = np.isfinite(radii) & (radii > thr)
+    if not ok.any():
+        return FailedFit(reason="every sampled triple is collinear or degenerate")
+    centres, radii = centres[ok], radii[ok]
+    best, best_count = -1, -1
+    for start in range(0, len(radii), 32):  # bounded memory: 32 x 4096 distances at a time
+        cc, rr = centres[start:start + 32], radii[start:start + 32]
+        dist = np.hypot(score[None, :, 0] - cc[:, 0, None], score[None, :, 1] - cc[:, 1, None])
+        counts = (np.abs(dist - rr[:, None]) < thr).sum(axis=1)
+        k = int(np.argmax(counts))
+        if counts[k] > best_count:
+            best, best_count = start + k, int(counts[k])
+    c, r = centres[best], float(radii[best])
+    for _ in range(2):  # refit on the inliers, inliers recomputed
+        inl = np.abs(np.hypot(*(pts - c).T) - r) < thr
+        if inl.sum() < 3:
+            return FailedFit(reason="the best circle has fewer than 3 inliers")
+        c, r = _kasa(pts[inl])
+    res = np.abs(np.hypot(*(pts - c).T) - r)
+    inl = res < thr
+    if inl.sum() < 3:
+        return FailedFit(reason="the refitted circle has fewer than 3 inliers")
+    return TransportCurve(center=(float(c[0]), float(c[1])), radius=r,
+                          inlier_fraction=float(inl.mean()),
+                          rms=float(np.sqrt(np.mean(res[inl] ** 2))))
+
+
+def fit_ngon(
+    xy: npt.ArrayLike,
+    *,
+    n_sides: int,
+    start: TransportCurve | None = None,
+    residual_threshold: float | None = None,
+    max_trials: int = 64,
+    rng: RngLike = None,
+) -> TransportCurve | FailedFit:
+    """Regular ``n_sides``-gon RANSAC on a footprint.
+
+    A hypothesis is a centre (from a 3-point circle, or ``start``'s centre), an orientation
+    (the phase of the n-th angular harmonic of the radius around that centre: a regular
+    polygon's radius peaks at its corners) and an apothem (the median polygonal distance).
+    The hypothesis with most inliers is refined by Gauss-Newton on the inliers' residuals.
+
+    Parameters
+    ----------
+    xy : array-like of shape (n_points, 2)
+    n_sides : int
+        At least 3.
+    start : TransportCurve, optional
+        A circle already fitted (its centre is the first hypothesis).
+    residual_threshold, max_trials, rng
+        As :func:`fit_circle`.
+
+    Examples
+    --------
+    >>> t = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    >>> corners = np.column_stack([np.cos(t), np.sin(t)])
+    >>> s = np.linspace(0, 1, 7)[:, None, None]
+    >>> xy = (corners[None] * (1 - s) + np.roll(corners, -1, axis=0)[None] * s).reshape(-1, 2)
+    >>> g = fit_ngon(xy, n_sides=8, rng=0)
+    >>> round(g.radius, 4), round(g.rms, 6)
+    (0.9239, 0.0)
+    """
+    pts = np.asarray(xy, dtype=np.float64)
+    if n_sides < 3:
+        raise ValueError(f"The 'n_sides' parameter of fit_ngon must be an int >= 3. Got {n_sides} instead.")
+    if len(pts) < 4:
+        return FailedFit(reason=f"a polygon needs 4 points; got {len(pts)}")
+    rng = np.random.default_rng(rng)
+    thr = _threshold(pts, residual_threshold)
+    score = pts if len(pts) <= _SCORE_SAMPLE else pts[rng.choice(len(pts), _SCORE_SAMPLE, replace=False)]
+    idx = rng.integers(0, len(pts), size=(max_trials, 3))
+    centres, radii = _circles_through(pts[idx[:, 0]], pts[idx[:, 1]], pts[idx[:, 2]])
+    centres = centres[np.isfinite(radii)]
+    if start is not None:
+        centres = np.vstack([np.asarray(start.center)[None], centres])
+    if not len(centres):
+        return FailedFit(reason="no centre hypothesis")
+
+    def hypothesis(c: FloatArray, sample: FloatArray) -> TransportCurve:
+        d = sample - c
+        r, th = np.hypot(d[:, 0], d[:, 1]), np.arctan2(d[:, 1], d[:, 0])
+        corner = np.angle(np.sum(r * np.exp(1j * n_sides * th))) / n_sides
+        g = TransportCurve(center=(float(c[0]), float(c[1])), radius=1.0, n_sides=n_sides,
+                           angle=float(corner + math.pi / n_sides))
+        a = float(np.median(g.distance(sample)))
+        return TransportCurve(center=g.center, radius=a, n_sides=n_sides, angle=g.angle)
+
+    best, best_count = None, -1
+    for c in centres:
+        g = hypothesis(c, score)
+        count = int((g.residuals(score) < thr).sum())
+        if count > best_count:
+            best, best_count = g, count
+    assert best is not None
+    g = best
+    for _ in range(3):  # Gauss-Newton on (cx, cy, apothem, angle) over the inliers
+        inl = g.residuals(pts) < thr
+        if inl.sum() < 4:
+            return FailedFit(reason="the best polygon has fewer than 4 inliers")
+        q = pts[inl]
+        params = np.array([g.center[0], g.center[1], g.radius, g.angle])
+
+        def resid(pv: FloatArray, q: FloatArray = q) -> FloatArray:
+            gg = TransportCurve(center=(pv[0], pv[1]), radius=pv[2], n_sides=n_sides, angle=pv[3])
+            return gg.distance(q) - pv[2]
+
+        r0 = resid(params)
+        jac = np.empty((len(q), 4))
+        for j in range(4):
+            dp = np.zeros(4)
+            dp[j] = 1e-6 * max(1.0, abs(params[j]))
+            jac[:, j] = (resid(params + dp) - r0) / dp[j]
+        step = np.linalg.lstsq(jac, -r0, rcond=None)[0]
+        params = params + step
+        g = TransportCurve(center=(float(params[0]), float(params[1])), radius=abs(float(params[2])),
+                           n_sides=n_sides, angle=float(np.mod(params[3], 2 * math.pi / n_sides)))
+    res = g.residuals(pts)
+    inl = res < thr
+    if inl.sum() < 4:
+        return FailedFit(reason="the refined polygon has fewer than 4 inliers")
+    return TransportCurve(center=g.center, radius=g.radius, n_sides=n_sides, angle=g.angle,
+                          inlier_fraction=float(inl.mean()),
+                          rms=float(np.sqrt(np.mean(res[inl] ** 2))))
+
+
+def psi(
+    xy: npt.ArrayLike,
+    *,
+    sides: tuple[int, ...] = DEFAULT_SIDES,
+    residual_threshold: float | None = None,
+    max_trials: int = 256,
+    straightness: float = 3.0,
+    rng: RngLike = None,
+) -> TransportCurve | FailedFit:
+    """Transport curve ``psi`` of a footprint: circle RANSAC, then n-gon RANSAC.
+
+    A polygon replaces the circle when it holds at least 10 % more inliers (an octagonal
+    shaft fits a circle only near its corners and mid-sides). A footprint whose circle
+    inliers lie on a straight line as well as on the circle (line RMS below
+    ``straightness`` x the circle's RMS, or a radius over 10 x the footprint's size) has no
+    transport curve: a straight wall is ``h``'s case, not ``p``'s or ``u``'s.
+
+    Parameters
+    ----------
+    xy : array-like of shape (n_points, 2)
+    sides : tuple of int
+        Polygons tried after the circle; ``()`` for circles only.
+    residual_threshold, max_trials, rng
+        As :func:`fit_circle`.
+    straightness : float
+        See above.
+
+    Returns
+    -------
+    TransportCurve or FailedFit
+
+    Examples
+    --------
+    >>> t = np.linspace(0, np.pi, 6)
+    >>> c = psi(np.column_stack([3 * np.cos(t), 3 * np.sin(t)]), rng=0)
+    >>> round(c.radius, 6), c.n_sides
+    (3.0, 0)
+    >>> bool(psi([[0, 0], [1, 0], [2, 0], [3, 0], [4, 0], [5, 0.001]], rng=0))
+    False
+    """
+    pts = np.asarray(xy, dtype=np.float64)
+    rng = np.random.default_rng(rng)
+    circle = fit_circle(pts, residual_threshold=residual_threshold, max_trials=max_trials, rng=rng)
+    if not circle:
+        return circle
+    assert isinstance(circle, TransportCurve)
+    thr = _threshold(pts, residual_threshold)
+    size = float(np.hypot(*(pts.max(axis=0) - pts.min(axis=0))))
+    if circle.radius > 10.0 * max(size, thr):
+        return FailedFit(reason=f"footprint is straight (circle radius {circle.radius:.3g} m)")
+    inl = pts[circle.residuals(pts) < thr]
+    q = inl - inl.mean(axis=0)
+    line_rms = math.sqrt(float(np.linalg.eigvalsh(q.T @ q)[0]) / len(q))
+    if line_rms < straightness * max(circle.rms, 1e-3 * thr):
+        return FailedFit(reason=f"footprint is straight (line RMS {line_rms:.3g} m, "
+                                f"circle RMS {circle.rms:.3g} m)")
+    best: TransportCurve = circle
+    for n in sides:
+        g = fit_ngon(pts, n_sides=n, start=circle, residual_threshold=thr,
+                     max_trials=max(8, max_trials // 8), rng=rng)
+        if g and isinstance(g, TransportCurve) and g.inlier_fraction > 1.1 * best.inlier_fraction:
+            best = g
+    return best
+
+
+# --------------------------------------------------------------------------- p, u
+def p(xyz: npt.ArrayLike, curve: TransportCurve) -> FloatArray:
+    """Profile curve ``p``: ``(distance from the curve's axis, z)`` of every point.
+
+    Examples
+    --------
+    >>> c = TransportCurve(center=(1.0, 0.0), radius=2.0)
+    >>> p([[3, 0, 5], [1, 0.5, 7]], c).tolist()
+    [[2.0, 5.0], [0.5, 7.0]]
+    """
+    a = np.asarray(xyz, dtype=np.float64)
+    return np.stack([curve.distance(a[:, :2]), a[:, 2]], axis=1)
+
+
+def u(xyz: npt.ArrayLike, curve: TransportCurve) -> FloatArray:
+    """Circular un-warping ``u``: ``(arc length along the curve, z)`` of every point.
+
+    The arc length is measured on the curve itself (radius x angle for a circle, along
+    the sides for a polygon) and starts just after the widest empty angular gap of the
+    points, so a partial ring (a curved arcade) un-warps without a seam inside it.
+
+    Examples
+    --------
+    >>> c = TransportCurve(center=(0.0, 0.0), radius=2.0)
+    >>> xyz = [[0, 2, 0], [2, 0, 1], [0, -3, 2], [1.4142, 1.4142, 3]]  # 90, 0, -90, 45 deg
+    >>> np.round(u(xyz, c), 4).tolist()
+    [[6.2832, 0.0], [3.1416, 1.0], [0.0, 2.0], [4.7124, 3.0]]
+    """
+    a = np.asarray(xyz, dtype=np.float64)
+    s = curve.position(a[:, :2])
+    per = curve.perimeter
+    if len(s) >= 2:
+        srt = np.sort(s)
+        gaps = np.diff(np.r_[srt, srt[0] + per])
+        k = int(np.argmax(gaps))
+        start = srt[(k + 1) % len(srt)]
+        s = np.mod(s - start, per)
+    elif len(s):
+        s = np.zeros_like(s)
+    return np.stack([s, a[:, 2]], axis=1)
+
+
+# --------------------------------------------------------------------------- v2, rho
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Histogram:
+    """The limited-bin histogram of ``v2`` and the fine one it came from.
+
+    Attributes
+    ----------
+    edges : ndarray of shape (n_bins + 1,)
+    values : ndarray of shape (n_bins,)
+        Limited-bin signal: mean of the smoothed fine signal over each bin.
+    fine_edges : ndarray of shape (n_fine + 1,)
+    fine_values : ndarray of shape (n_fine,)
+        The fine, lightly smoothed signal (peaks are refined on it).
+    n_zero_crossings : int
+        Sign changes of the fine signal's derivative (sets ``n_bins``).
+    """
+
+    edges: FloatArray
+    values: FloatArray
+    fine_edges: FloatArray
+    fine_values: FloatArray
+    n_zero_crossings: int
+
+    @property
+    def n_bins(self) -> int:
+        return len(self.values)
+
+
+def _fine_bins(n: int) -> int:
+    return int(np.clip(round(math.sqrt(max(n, 1))), 16, 512))
+
+
+def v2(
+    x: npt.ArrayLike,
+    values: npt.ArrayLike | None = None,
+    *,
+    statistic: Literal["count", "max"] = "count",
+    n_fine: int | None = None,
+    sigma: float = 1.0,
+    bins_per_crossing: float = 1.0,
+) -> Histogram:
+    """Limited-bin histogram ``v2`` of positions ``x``.
+
+    A fine histogram (``n_fine`` bins, default ``sqrt(n)`` clipped to 16..512) holds, per
+    bin, either the point count (``statistic="count"``) or the largest of ``values``
+    (``"max"``: the profile curve's outline, empty bins set to the signal's minimum so a
+    gap is a valley). It is smoothed with a Gaussian of ``sigma`` fine bins; the number of
+    sign changes of its derivative plus one, times ``bins_per_crossing``, is the number of
+    limited bins (the paper's rule; at least 3, so one peak can show); each limited bin holds the mean of the smoothed fine values
+    it covers.
+
+    Parameters
+    ----------
+    x : array-like of shape (n_points,)
+    values : array-like of shape (n_points,), optional
+        Needed for ``statistic="max"``.
+    statistic : {"count", "max"}
+    n_fine : int, optional
+    sigma : float
+    bins_per_crossing : float
+
+    Returns
+    -------
+    Histogram
+
+    Examples
+    --------
+    >>> x = np.r_[np.zeros(5), np.ones(2), 2 * np.ones(5)]
+    >>> hh = v2(x, n_fine=16, sigma=0.0)   # fine counts 5, 0.., 2, 0.., 5
+    >>> hh.n_zero_crossings, hh.n_bins
+    (3, 4)
+    >>> hh.values.round(2).tolist()
+    [1.25, 0.0, 0.5, 1.25]
+    """
+    xs = np.asarray(x, dtype=np.float64)
+    nf = _fine_bins(len(xs)) if n_fine is None else int(n_fine)
+    lo, hi = (float(xs.min()), float(xs.max())) if len(xs) else (0.0, 1.0)
+    if hi <= lo:
+        hi = lo + 1.0
+    fine_edges = np.linspace(lo, hi, nf + 1)
+    b = np.clip(((xs - lo) / (hi - lo) * nf).astype(np.int64), 0, nf - 1)
+    if statistic == "count":
+        f = np.bincount(b, minlength=nf).astype(np.float64)
+    elif statistic == "max":
+        if values is None:
+            raise ValueError("v2 with statistic='max' needs values")
+        f = np.full(nf, -np.inf)
+        np.maximum.at(f, b, np.asarray(values, dtype=np.float64))
+        empty = ~np.isfinite(f)
+        f[empty] = f[~empty].min() if (~empty).any() else 0.0
+    else:
+        raise ValueError(f"The 'statistic' parameter of v2 must be 'count' or 'max'. Got {statistic!r} instead.")
+    g = gaussian_filter1d(f, sigma, mode="nearest") if sigma > 0 else f
+    sg = np.sign(np.diff(g))
+    sg = sg[sg != 0]
+    z = int(np.count_nonzero(sg[1:] != sg[:-1]))
+    nb = int(np.clip(round(bins_per_crossing * (z + 1)), min(3, nf), nf))
+    edges = np.linspace(lo, hi, nb + 1)
+    cb = np.minimum(np.arange(nf) * nb // nf, nb - 1)
+    vals = np.bincount(cb, g, minlength=nb) / np.maximum(np.bincount(cb, minlength=nb), 1)
+    return Histogram(edges=edges, values=vals, fine_edges=fine_edges, fine_values=g,
+                     n_zero_crossings=z)
+
+
+def rho(hist: Histogram, *, prominence: float = 0.1) -> FloatArray:
+    """Peak finding ``rho``: cut positions at the limited histogram's peaks.
+
+    Peaks are ``scipy.signal.find_peaks`` maxima of ``hist.values`` whose prominence is at
+    least ``prominence`` x the larger of the signal's range and its largest absolute value
+    (an edge bin is never a peak). Each peak is
+    refined inside its bin: the position of the fine signal's maximum within the bin,
+    with a parabola through that fine bin and its neighbours.
+
+    Returns
+    -------
+    cuts : ndarray of shape (n_peaks,), sorted
+
+    Examples
+    --------
+    >>> x = np.r_[np.zeros(5), np.ones(9), 2 * np.ones(5)]
+    >>> rho(v2(x, n_fine=16, sigma=0.0)).round(4).tolist()   # fine bin [1, 1.125)
+    [1.0625]
+    """
+    vals = hist.values
+    if len(vals) < 3:
+        return np.empty(0)
+    span = float(vals.max() - vals.min())
+    if span <= 0:
+        return np.empty(0)
+    # Relative to the signal's level too, so the wiggles of a flat histogram are no peaks.
+    peaks, _ = find_peaks(vals, prominence=prominence * max(span, float(np.abs(vals).max())))
+    return _refine(hist, peaks)
+
+
+def _refine(hist: Histogram, peaks: IntArray) -> FloatArray:
+    """Exact positions of the peaks found in limited bins ``peaks``.
+
+    Each peak's fine maximum is looked for inside its own bin; the fine signal between
+    two neighbouring peaks is split at its minimum (the valley), so every peak owns a
+    region. The position is the centre of the run around the maximum where the fine
+    signal stays above a quarter of the way from the higher of the region's two valleys
+    to the maximum: the middle of a plateau (a pier, a balcony), not a spike on its edge.
+    """
+    fe, fv = hist.fine_edges, hist.fine_values
+    nf = len(fv)
+    tops = []
+    for k in peaks:
+        b0 = min(int(np.searchsorted(fe, hist.edges[k], side="left")), nf - 1)
+        b1 = max(min(int(np.searchsorted(fe, hist.edges[k + 1], side="left")), nf), b0 + 1)
+        tops.append(b0 + int(np.argmax(fv[b0:b1])))
+    valleys = [0]
+    for a, b in zip(tops[:-1], tops[1:], strict=True):
+        valleys.append(a + int(np.argmin(fv[a:b + 1])) if b > a else a)
+    valleys.append(nf - 1)
+    out = []
+    for i, j in enumerate(tops):
+        lo, hi = valleys[i], max(valleys[i + 1], j)
+        ref = max(float(fv[lo:j + 1].min()), float(fv[j:hi + 1].min()))
+        level = ref + 0.25 * (float(fv[j]) - ref)
+        a = j
+        while a > lo and fv[a - 1] >= level:
+            a -= 1
+        b = j
+        while b < hi and fv[b + 1] >= level:
+            b += 1
+        out.append(0.5 * (fe[a] + fe[b + 1]))
+    return np.asarray(out, dtype=np.float64)
+
+
+def split_at(x: npt.ArrayLike, cuts: npt.ArrayLike) -> list[IntArray]:
+    """Children of a split: indices of the points between consecutive cuts (empty ones
+    dropped), in order of position.
+
+    Examples
+    --------
+    >>> [c.tolist() for c in split_at([0.5, 2.5, 1.5, 0.1, 9.0], [1.0, 2.0, 3.0])]
+    [[0, 3], [2], [1], [4]]
+    """
+    xs = np.asarray(x, dtype=np.float64)
+    lab = np.searchsorted(np.sort(np.asarray(cuts, dtype=np.float64)), xs, side="right")
+    order = np.argsort(lab, kind="stable")
+    bounds = np.searchsorted(lab[order], np.arange(lab.max() + 2 if len(lab) else 1))
+    out = [order[bounds[i]:bounds[i + 1]].astype(np.int64) for i in range(len(bounds) - 1)]
+    return [c for c in out if len(c)]

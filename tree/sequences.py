@@ -1,0 +1,255 @@
+"""The three projection sequences of the paper, each proposing a split of one node.
+
+- ``S1 = rho(v2(p(psi(v1(x)))))``: the profile curve (minaret stages, drum vs dome);
+- ``S2 = rho(v2(h(x)))``: the dominant vertical plane (bays of straight walls and arcades);
+- ``S3 = rho(v2(u(psi(v1(x)))))``: the un-warped transport curve (bays of curved arcades).
+
+Each returns a :class:`Proposal` (children as index arrays into the node's points, in
+order along the cut axis) or None when it has nothing to propose: no transport curve
+(S1, S3), fewer than two children, or too few points.
+
+What each histogram holds (the paper says only "the histogram of the profile curve"):
+S1 bins the height and keeps the profile's outline, the largest distance from the axis
+in each bin, so a balcony or a moulding is a peak; S2 and S3 bin the position along the
+wall and count points, so a pier (front, back and both soffits) is a peak and an opening
+a valley. Cuts at peaks put each balcony or pier on a boundary, as the ground truth's
+"mid-pier to mid-pier" bays are.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from tree.operators import (
+    RngLike,
+    TransportCurve,
+    h,
+    p,
+    psi,
+    rho,
+    split_at,
+    u,
+    v1,
+    v2,
+)
+
+__all__ = ["SEQUENCES", "Proposal", "SequenceParams", "propose", "s1", "s2", "s3"]
+
+IntArray = npt.NDArray[np.int64]
+FloatArray = npt.NDArray[np.float64]
+
+#: Sequence ids as stored in the node table (0 = the root, produced by no sequence).
+SEQUENCES: tuple[int, ...] = (1, 2, 3)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SequenceParams:
+    """Settings shared by the three sequences.
+
+    Attributes
+    ----------
+    prominence : float
+        Peak prominence as a fraction of the histogram's range (:func:`~tree.operators.rho`).
+    sigma : float
+        Smoothing of the fine histogram, in fine bins.
+    bins_per_crossing : float
+        Limited bins per zero crossing of the derivative (:func:`~tree.operators.v2`).
+    min_points : int
+        Nodes with fewer points get no proposal.
+    min_child_fraction : float
+        A child holding less than this share of the node's points is merged into its
+        neighbour across the weaker cut (a peak in a sparse stretch is not a boundary).
+    residual_threshold : float or None
+        Circle/n-gon RANSAC inlier distance (default: 1 % of the footprint).
+    """
+
+    prominence: float = 0.05
+    sigma: float = 1.0
+    bins_per_crossing: float = 1.0
+    min_points: int = 30
+    min_child_fraction: float = 0.02
+    residual_threshold: float | None = None
+
+    def to_dict(self) -> dict[str, object]:
+        return dict(self.__dict__)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, object]) -> SequenceParams:
+        return cls(**d)  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Proposal:
+    """One sequence's proposed split of a node.
+
+    Attributes
+    ----------
+    sequence : int
+        1, 2 or 3.
+    children : tuple of ndarray of int64
+        Indices into the node's points; disjoint, covering every point.
+    cuts : ndarray of float64
+        Cut positions along the sequence's axis (z for S1, t for S2, arc length for S3).
+    curve : TransportCurve or None
+        The transport curve (S1, S3).
+    """
+
+    sequence: int
+    children: tuple[IntArray, ...]
+    cuts: FloatArray
+    curve: TransportCurve | None = None
+
+    @property
+    def n_children(self) -> int:
+        return len(self.children)
+
+
+def _merge_small(x: FloatArray, cuts: FloatArray, min_count: int) -> FloatArray:
+    """Drop cuts until every child holds at least ``min_count`` points (the smallest
+    child first, merged with its smaller neighbour)."""
+    cuts = np.sort(cuts)
+    while len(cuts):
+        counts = np.bincount(np.searchsorted(cuts, x, side="right"), minlength=len(cuts) + 1)
+        k = int(np.argmin(counts))
+        if counts[k] >= min_count:
+            break
+        if k == 0:
+            drop = 0
+        elif k == len(cuts):
+            drop = len(cuts) - 1
+        else:
+            drop = k - 1 if counts[k - 1] <= counts[k + 1] else k
+        cuts = np.delete(cuts, drop)
+    return cuts
+
+
+def _merge_short_ends(x: FloatArray, cuts: FloatArray) -> FloatArray:
+    """Drop an end cut whose end child is shorter than half the median length of the
+    children (a half pier or an end cap at the end of a wall is not a bay)."""
+    while len(cuts) >= 2:
+        lo, hi = float(x.min()), float(x.max())
+        lengths = np.diff(np.r_[lo, cuts, hi])
+        med = float(np.median(lengths))
+        if lengths[-1] < 0.5 * med and lengths[-1] <= lengths[0]:
+            cuts = cuts[:-1]
+        elif lengths[0] < 0.5 * med:
+            cuts = cuts[1:]
+        else:
+            break
+    return cuts
+
+
+def _finish(seq: int, x: FloatArray, cuts: FloatArray, params: SequenceParams,
+            curve: TransportCurve | None) -> Proposal | None:
+    cuts = _merge_small(x, cuts, max(1, int(np.ceil(params.min_child_fraction * len(x)))))
+    cuts = _merge_short_ends(x, cuts)
+    children = split_at(x, cuts)
+    if len(children) < 2:
+        return None
+    return Proposal(sequence=seq, children=tuple(children), cuts=cuts, curve=curve)
+
+
+def _as_xyz(xyz: npt.ArrayLike) -> FloatArray:
+    a = np.asarray(xyz, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ValueError(f"The 'xyz' parameter must be an array of shape (n_points, 3). Got shape {a.shape} instead.")
+    return a
+
+
+def s1(xyz: npt.ArrayLike, *, params: SequenceParams | None = None, rng: RngLike = None,
+       curve: TransportCurve | None = None) -> Proposal | None:
+    """``S1 = rho(v2(p(psi(v1(x)))))``: cut at the peaks of the profile curve.
+
+    ``curve`` skips ``psi`` (S1 and S3 share one transport curve in :func:`propose`).
+
+    Examples
+    --------
+    >>> z = np.linspace(0, 9, 200)
+    >>> r = np.where(np.abs(z - 4.5) < 0.5, 2.0, 1.0)   # a balcony at z = 4.5
+    >>> t = np.linspace(0, 40 * np.pi, 200)
+    >>> xyz = np.column_stack([r * np.cos(t), r * np.sin(t), z])
+    >>> prop = s1(xyz, rng=0)
+    >>> prop.n_children, [round(float(c), 1) for c in prop.cuts]
+    (2, [4.5])
+    """
+    a = _as_xyz(xyz)
+    params = params or SequenceParams()
+    if len(a) < params.min_points:
+        return None
+    if curve is None:
+        fit = psi(v1(a), residual_threshold=params.residual_threshold, rng=rng)
+        if not fit:
+            return None
+        assert isinstance(fit, TransportCurve)
+        curve = fit
+    prof = p(a, curve)
+    hist = v2(prof[:, 1], prof[:, 0], statistic="max", sigma=params.sigma,
+              bins_per_crossing=params.bins_per_crossing)
+    return _finish(1, prof[:, 1], rho(hist, prominence=params.prominence), params, curve)
+
+
+def s2(xyz: npt.ArrayLike, *, params: SequenceParams | None = None) -> Proposal | None:
+    """``S2 = rho(v2(h(x)))``: cut at the density peaks along the dominant vertical plane.
+
+    Examples
+    --------
+    >>> t = np.r_[np.linspace(0, 1, 30), np.full(40, 1.5), np.linspace(2, 3, 30)]
+    >>> xyz = np.column_stack([t, np.zeros(100), np.linspace(0, 1, 100)])
+    >>> prop = s2(xyz)
+    >>> prop.n_children, [len(c) for c in prop.children]
+    (2, [70, 30])
+    """
+    a = _as_xyz(xyz)
+    params = params or SequenceParams()
+    if len(a) < params.min_points:
+        return None
+    t = h(a)[:, 0]
+    hist = v2(t, statistic="count", sigma=params.sigma, bins_per_crossing=params.bins_per_crossing)
+    return _finish(2, t, rho(hist, prominence=params.prominence), params, None)
+
+
+def s3(xyz: npt.ArrayLike, *, params: SequenceParams | None = None, rng: RngLike = None,
+       curve: TransportCurve | None = None) -> Proposal | None:
+    """``S3 = rho(v2(u(psi(v1(x)))))``: cut at the density peaks along the un-warped curve.
+
+    Examples
+    --------
+    >>> th = np.r_[np.linspace(0, 1, 40), np.full(40, 1.25), np.linspace(1.5, 2.5, 40)]
+    >>> xyz = np.column_stack([5 * np.cos(th), 5 * np.sin(th), np.linspace(0, 1, 120)])
+    >>> prop = s3(xyz, rng=0)
+    >>> prop.n_children, round(prop.curve.radius, 3)
+    (2, 5.0)
+    """
+    a = _as_xyz(xyz)
+    params = params or SequenceParams()
+    if len(a) < params.min_points:
+        return None
+    if curve is None:
+        fit = psi(v1(a), residual_threshold=params.residual_threshold, rng=rng)
+        if not fit:
+            return None
+        assert isinstance(fit, TransportCurve)
+        curve = fit
+    s = u(a, curve)[:, 0]
+    hist = v2(s, statistic="count", sigma=params.sigma, bins_per_crossing=params.bins_per_crossing)
+    return _finish(3, s, rho(hist, prominence=params.prominence), params, curve)
+
+
+def propose(xyz: npt.ArrayLike, *, params: SequenceParams | None = None,
+            rng: RngLike = None) -> dict[int, Proposal | None]:
+    """All three proposals for one node, ``{1: S1, 2: S2, 3: S3}`` (one ``psi`` fit shared
+    by S1 and S3)."""
+    a = _as_xyz(xyz)
+    params = params or SequenceParams()
+    curve: TransportCurve | None = None
+    if len(a) >= params.min_points:
+        fit = psi(v1(a), residual_threshold=params.residual_threshold, rng=rng)
+        curve = fit if isinstance(fit, TransportCurve) else None
+    return {
+        1: s1(a, params=params, curve=curve) if curve is not None else None,
+        2: s2(a, params=params),
+        3: s3(a, params=params, curve=curve) if curve is not None else None,
+    }
