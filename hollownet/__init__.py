@@ -1,6 +1,39 @@
-"""HollowNet: hollow voxels and the 3D CNN that classifies segments.
+"""HollowNet: hollow voxels and the 3D CNN that classifies segments (``docs/hollownet.md``).
 
-Not built yet: issue 5 builds it. Nothing here is importable beyond this docstring.
+``voxels`` (NumPy) turns a segment into a 30^3 grid; ``model`` holds the network, its
+registry and checkpoints; ``predict`` the batched :class:`Classifier` (one per process);
+``dataset`` makes training data from synthetic scans; ``train`` trains and reports.
 """
 
-__all__: list[str] = []
+from hollownet.model import (
+    DEFAULT_WEIGHTS,
+    NUM_OUTPUTS,
+    OUTPUT_CLASSES,
+    HollowNet,
+    WeightsError,
+    get_model,
+    hollownet_v1,
+    list_models,
+    load_model,
+)
+from hollownet.predict import Classifier, Prediction
+from hollownet.voxels import EMPTY, OCCUPIED, DegenerateSegmentError, voxelize, voxelize_batch
+
+__all__ = [
+    "DEFAULT_WEIGHTS",
+    "EMPTY",
+    "NUM_OUTPUTS",
+    "OCCUPIED",
+    "OUTPUT_CLASSES",
+    "Classifier",
+    "DegenerateSegmentError",
+    "HollowNet",
+    "Prediction",
+    "WeightsError",
+    "get_model",
+    "hollownet_v1",
+    "list_models",
+    "load_model",
+    "voxelize",
+    "voxelize_batch",
+]

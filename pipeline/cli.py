@@ -146,11 +146,19 @@ def build_parser() -> argparse.ArgumentParser:
                    help="smallest primitive, points (default 1000)")
     c.add_argument("--eps", type=_float, help="DBSCAN radius, metres (default: 3 x point spacing)")
     c.add_argument("--min-samples", type=_positive_int, default=10, help="DBSCAN core threshold")
+    c.add_argument("--no-free-segments", action="store_true",
+                   help="leave points that no primitive explains unsegmented (default: DBSCAN them too)")
+    c.add_argument("--free-min-points", type=_positive_int, default=200,
+                   help="smallest free segment, points (default 200)")
     c.add_argument("--seed", type=int, default=0)
     c.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process")
     c.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
     c.add_argument("--no-progress", action="store_true", help="no progress bars")
     c.set_defaults(func=_cmd_coarse)
+
+    from pipeline.hollownet_cmd import add_parsers as add_hollownet_parsers
+
+    add_hollownet_parsers(sub)  # train, classify
 
     tr = sub.add_parser(
         "tree",
@@ -340,6 +348,7 @@ def _cmd_coarse(args: argparse.Namespace) -> int:
     params = CoarseParams(
         ransac=RansacParams(epsilon=args.epsilon, alpha_deg=args.alpha, min_support=args.min_support),
         cluster_epsilon=args.cluster_epsilon, eps=args.eps, min_samples=args.min_samples, seed=args.seed,
+        free_segments=not args.no_free_segments, free_min_points=args.free_min_points,
     )
     with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
         report = run_coarse(args.store, params, runner=run)

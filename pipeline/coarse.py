@@ -65,6 +65,14 @@ class CoarseParams:
         scan, computed once for the whole store so every tile uses the same value.
     min_samples : int
         DBSCAN core threshold.
+    free_segments : bool
+        Also split the points that no primitive explains into DBSCAN clusters ("free"
+        segments, primitive code 0), so that small or sparsely scanned elements (a
+        minaret whose stages are each below the minimum support, a small dome) still reach
+        the tree and HollowNet. The paper leaves these points' fate open; without this
+        they stay unsegmented and unlabelled.
+    free_min_points : int
+        Free clusters smaller than this stay unsegmented (scanner noise, stray points).
     seed : int
         Base seed; tile t uses ``SeedSequence([seed, t])``.
     angle_tol_deg, distance_tol, radius_tol : float
@@ -78,6 +86,8 @@ class CoarseParams:
     cluster_epsilon: float | None = None
     eps: float | None = None
     min_samples: int = 10
+    free_segments: bool = True
+    free_min_points: int = 200
     seed: int = 0
     angle_tol_deg: float = 10.0
     distance_tol: float = 0.15
@@ -132,11 +142,17 @@ def coarse_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, int]:
             res = efficient_ransac(xyz[valid], nr.normals[valid], **params.ransac.to_dict(), rng=rng)
             labels[valid] = res.labels
             fits = res.primitives
-    segment = dbscan_segments(xyz, labels, eps=cfg["eps"], min_samples=params.min_samples) if n else np.zeros(0, np.int64)
+    free = len(fits)  # the group of points no primitive explains
+    groups = np.where(labels < 0, free if params.free_segments else -1, labels)
+    segment = dbscan_segments(xyz, groups, eps=cfg["eps"], min_samples=params.min_samples) if n else np.zeros(0, np.int64)
+    if params.free_segments and n:
+        in_free = (groups == free) & (segment > 0)
+        sizes = np.bincount(segment[in_free], minlength=int(segment.max(initial=0)) + 1)
+        segment[in_free & (sizes[segment] < params.free_min_points)] = 0
     primitive = np.zeros(n, dtype=np.uint8)
     has = segment > 0
-    kinds = np.array([PRIMITIVE_CODES[f.kind] for f in fits] + [0], dtype=np.uint8)
-    primitive[has] = kinds[labels[has]]
+    kinds = np.array([PRIMITIVE_CODES[f.kind] for f in fits] + [0], dtype=np.uint8)  # free: 0
+    primitive[has] = kinds[groups[has]]
     store.write_unit(f"coarse/tiles/{tile}", {
         "primitive": primitive,
         "segment": segment.astype(np.int32),
@@ -155,14 +171,19 @@ def coarse_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, int]:
             if sid <= 0:
                 continue
             rows_idx = order[a:b]
-            fit = fits[int(labels[rows_idx[0]])]
+            g = int(groups[rows_idx[0]])
             core = d["core"][rows_idx]
             world = xyz[rows_idx] + offset
             rows["tile"].append(tile)
             rows["segment"].append(sid)
-            rows["kind"].append(fit.kind)
-            rows["params"].append(json.dumps(list(fit.params)))
-            rows["rms"].append(float(fit.rms))
+            if g == free:
+                rows["kind"].append("free")
+                rows["params"].append("[]")
+                rows["rms"].append(float("nan"))
+            else:
+                rows["kind"].append(fits[g].kind)
+                rows["params"].append(json.dumps(list(fits[g].params)))
+                rows["rms"].append(float(fits[g].rms))
             rows["n_points"].append(int(len(rows_idx)))
             rows["n_core"].append(int(core.sum()))
             rows["min_index"].append(int(d["index"][rows_idx][core].min()) if core.any() else -1)
@@ -215,6 +236,8 @@ def _same_primitive(a: dict[str, Any], b: dict[str, Any], p: CoarseParams) -> bo
     """Whether two tiles' fits describe the same primitive (within the tolerances)."""
     if a["kind"] != b["kind"]:
         return False
+    if a["kind"] == "free":  # no parameters to compare: shared points decide
+        return True
     pa_, pb = np.asarray(json.loads(a["params"])), np.asarray(json.loads(b["params"]))
     cos_tol = math.cos(math.radians(p.angle_tol_deg))
     if a["kind"] == "plane":

@@ -11,7 +11,9 @@ Store layout written here (``docs/store.md``)::
 
     tree/batches/<b>/leaf      uint64 (n,)  node id of each point's leaf (CSR order)
     tree/batches/<b>/class     uint8  (n,)  class of each point
-    tree/batches/<b>/instance  uint32 (n,)  element instance, numbered within the batch; 0 = none
+    tree/batches/<b>/instance  uint32 (n,)  instance, numbered within the batch; 0 = none: element
+                                            instances of the tree, and one instance per planar
+                                            class (ground, wall, roof) and coarse segment
     tree/batches/<b>/score     float32(n,)  the classifier's score of the leaf
     tree/tables/<b>.parquet                 the batch's tree nodes
     tree/nodes.parquet                      every node of every segment, instances numbered globally
@@ -29,6 +31,7 @@ import numpy as np
 import pyarrow as pa
 
 from pipeline.coarse import _read_table, _write_table
+from tiling.classes import PLANAR_CLASSES
 from tiling.errors import ConfigError, PipelineError
 from tiling.store import RunStore
 
@@ -108,6 +111,7 @@ def _worker_threads() -> int | None:
     return 1
 
 
+_PLANAR = np.array([int(c) for c in PLANAR_CLASSES], dtype=np.uint8)
 _NODE_COLUMNS = ("segment", "node_id", "parent", "depth", "sequence", "e1", "e2", "e3", "e4", "e5", "xi",
                  "class_id", "score", "n_points", "xmin", "ymin", "zmin", "xmax", "ymax", "zmax",
                  "is_leaf", "instance")
@@ -144,6 +148,11 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any]) -> 
         node_inst = np.zeros(len(res.nodes), np.int64)
         node_inst[res.instance_node] = np.arange(1, len(res.instance_node) + 1) + n_inst
         n_inst += len(res.instance_node)
+        # Planar classes are one instance per class and coarse segment (METHOD.md, "Classes").
+        planar = np.isin(res.class_id, _PLANAR) & (res.instance == 0)
+        for c in np.unique(res.class_id[planar]).tolist():
+            n_inst += 1
+            inst[a:z][planar & (res.class_id == c)] = n_inst
         d = res.nodes.to_dict()
         m = len(res.nodes)
         cols["segment"] += [s + 1] * m

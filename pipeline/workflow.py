@@ -107,6 +107,8 @@ class CoarseSection(_Section):
         ["plane", "sphere", "cylinder", "cone"], description="primitive types to look for")
     eps: PosFloat | None = Field(None, description="DBSCAN radius, metres; null = 3 x point spacing")
     min_samples: PosInt = Field(10, description="DBSCAN core threshold")
+    free_segments: bool = Field(True, description="cluster the points no primitive explains into free segments too")
+    free_min_points: PosInt = Field(200, description="smallest free segment, points")
     seed: int = Field(0, description="base seed; tile t uses [seed, t]")
 
 

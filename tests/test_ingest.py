@@ -138,6 +138,16 @@ def test_bbox_subset(scan_file, tmp_path):
     assert len(_tiles(tmp_path / "s")) == rep.n_tiles
 
 
+def test_bbox_with_chunks_that_miss_the_box(scan_file, tmp_path):
+    """Map units whose records all fall outside the chosen tiles write nothing, no crash."""
+    las = laspy.read(scan_file)
+    x, y = float(las.x.min()), float(las.y.min())
+    rep = _ingest([scan_file], tmp_path / "s", bbox=(x, y, x + 0.5, y + 0.5), chunk_size=500)
+    assert rep.n_tiles == 1
+    (t,) = _tiles(tmp_path / "s").values()
+    assert t["core"].sum() == rep.n_core_points > 0
+
+
 def _run_cli(scan_file, store, *extra):
     return [sys.executable, "-m", "pipeline.cli", "ingest", str(scan_file), "--store", str(store),
             "--tile-size", "8", "--buffer", "0.5", "--chunk-size", "5000", "--scheduler", "sync",

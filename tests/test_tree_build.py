@@ -103,10 +103,6 @@ def _arches_matched(r, ginst, kids):
     return np.asarray(ious)
 
 
-@pytest.mark.xfail(strict=True, reason="known gap (issue 6): S2 and S3 give the same 9 bays here "
-                   "and the same e1, e3, e5; the fitted prior W[arch] ranks S2 a little above S3, "
-                   "so S2 wins by a hair. The split itself is right (9 children, 9 of 9 arches "
-                   "matched, checked by the test below).")
 def test_curved_arcade_gives_one_child_per_arch_by_s3():
     pts, ginst, clf = _segment("curved_arcade", ClassId.ARCH)
     n = len(np.unique(ginst))

@@ -60,6 +60,25 @@ def test_ngon_ransac_recovers_polygon(n_sides):
     assert np.abs(g.distance(xy) - 2.5).max() < 0.05
 
 
+def test_psi_on_a_large_footprint_fits_its_sample_and_stays_accurate():
+    """Over 2048 points psi fits a random sample; the curve must stay as exact."""
+    rng = np.random.default_rng(12)
+    xy = _polygon(rng, n_sides=8, apothem=2.0, center=(-3.0, 4.0), angle=0.2, n=60_000, noise=0.005)
+    clutter = rng.uniform(-5.2, -0.8, (3000, 2)) + [0.0, 6.0]  # 5 %, inside the footprint's box
+    g = psi(np.vstack([xy, clutter]), rng=0)
+    assert g
+    assert g.n_sides == 8
+    assert np.allclose(g.center, (-3.0, 4.0), atol=0.02)
+    assert g.radius == pytest.approx(2.0, abs=0.02)
+    ring = _ring(rng, center=(1.0, 1.0), radius=11.0, n=80_000, noise=0.02, arc=(0.4, 2.6))
+    c = psi(ring, rng=1)
+    assert c
+    assert c.n_sides == 0
+    assert c.radius == pytest.approx(11.0, abs=0.05)
+    x = rng.uniform(-10, 10, 50_000)
+    assert not psi(np.column_stack([x, 0.3 * x + rng.normal(0, 0.01, 50_000)]), rng=0)
+
+
 def test_round_footprint_stays_a_circle():
     rng = np.random.default_rng(3)
     c = psi(_ring(rng, radius=2.0, noise=0.005), rng=0)

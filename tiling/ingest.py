@@ -386,6 +386,8 @@ def map_chunk(url: str, unit: MapUnit, plan_attrs: dict[str, Any]) -> dict[str, 
         sub_of_point = _subcell_key(block.xyz, offset, width)
         keep = wanted[tile]
         point, tile, is_core = point[keep], tile[keep], is_core[keep]
+        if not len(point):  # nothing of this block lies in the tiles asked for
+            continue
         sub = sub_of_point[point]
         order = np.lexsort((sub, tile))
         point, tile, is_core, sub = point[order], tile[order], is_core[order], sub[order]

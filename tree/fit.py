@@ -9,15 +9,20 @@ is how well its children match the parts (:func:`proposal_target`): 1 for a spli
 the parts, 0 for any split of a single part.
 
 - ``W[k, n]``: the share of proposals of sequence ``n`` on parents of class ``k`` that
-  are good (target >= :data:`GOOD_TARGET`), shrunk towards the overall share by two
-  pseudo-proposals (a class never seen gets the overall share).
+  took the right path (:func:`right_paths`: good, target >= :data:`GOOD_TARGET`, and
+  the best proposal made at their node, equal targets ranked by how closely the matched
+  children cover their parts), shrunk towards the overall share by two pseudo-proposals
+  (a class never seen gets the overall share). It is the paper's "prior probability of
+  observing a certain projection sequence given the class", counted where the sequence
+  applies (S1 and S3 exist only where ``psi`` finds a transport curve).
 - ``w``: least squares of the targets on ``[e1..e5]``, no intercept (``xi = w . e`` as in
   the paper); R^2 against the targets' mean.
 - threshold: the ``xi`` that best separates good from bad proposals (balanced accuracy).
 
-Until HollowNet is trained the fit scores children with an oracle stand-in:
-class = the majority ground-truth class, score = the share of that class. Refit with the
-real classifier by passing it as ``classifier``.
+By default the fit scores children with an oracle stand-in: class = the majority
+ground-truth class, score = the share of that class (the shipped ``energy-v1.json``; see
+docs/method.md for why the HollowNet refit is not shipped yet). Refit with a real
+classifier by passing it as ``classifier``.
 """
 
 from __future__ import annotations
@@ -42,7 +47,9 @@ __all__ = [
     "fit_energy",
     "fit_energy_from_scenes",
     "minaret_stage_cuts",
+    "proposal_quality",
     "proposal_target",
+    "right_paths",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -124,6 +131,22 @@ def _oracle(labels: Sequence[npt.NDArray[Any]]) -> tuple[IntArray, FloatArray]:
     return cls, score
 
 
+def _matches(children: Sequence[IntArray], parts: npt.ArrayLike) -> list[float]:
+    """IoU of each child matched one-to-one to a part with IoU >= 0.5 (``parts``: a part
+    label per point of the parent)."""
+    lab = np.asarray(parts)
+    _, inv = np.unique(lab, return_inverse=True)
+    part_size = np.bincount(inv)
+    matched: dict[int, float] = {}
+    for c in children:
+        inter = np.bincount(inv[c], minlength=len(part_size))
+        iou = inter / (part_size + len(c) - inter)
+        q = int(np.argmax(iou))
+        if iou[q] >= 0.5 and q not in matched:  # IoU >= 0.5 makes the match unique
+            matched[q] = float(iou[q])
+    return list(matched.values())
+
+
 def proposal_target(children: Sequence[IntArray], parts: npt.ArrayLike) -> float:
     """What a split is worth against the ground-truth parts: ``(m - 1) / (s - 1)``.
 
@@ -140,20 +163,27 @@ def proposal_target(children: Sequence[IntArray], parts: npt.ArrayLike) -> float
     >>> proposal_target([np.array([0]), np.array([1, 2, 3])], np.zeros(4, int))
     0.0
     """
-    lab = np.asarray(parts)
-    _, inv = np.unique(lab, return_inverse=True)
-    part_size = np.bincount(inv)
     s = len(children)
     if s < 2:
         return 0.0
-    matched: set[int] = set()
-    for c in children:
-        inter = np.bincount(inv[c], minlength=len(part_size))
-        iou = inter / (part_size + len(c) - inter)
-        q = int(np.argmax(iou))
-        if iou[q] >= 0.5 and q not in matched:  # IoU >= 0.5 makes the match unique
-            matched.add(q)
-    return max(len(matched) - 1, 0) / (s - 1)
+    return max(len(_matches(children, parts)) - 1, 0) / (s - 1)
+
+
+def proposal_quality(children: Sequence[IntArray], parts: npt.ArrayLike) -> float:
+    """How closely the matched children cover their parts: the mean IoU of the children
+    matched as in :func:`proposal_target` (0 when none is). It ranks proposals of one
+    node that match the same number of parts (:func:`fit_energy`'s "right path").
+
+    Examples
+    --------
+    >>> parts = np.array([0, 0, 0, 1, 1, 1])
+    >>> proposal_quality([np.array([0, 1, 2]), np.array([3, 4, 5])], parts)
+    1.0
+    >>> round(proposal_quality([np.array([0, 1]), np.array([2, 3, 4, 5])], parts), 4)
+    0.7083
+    """
+    m = _matches(children, parts)
+    return float(np.mean(m)) if m else 0.0
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -169,7 +199,10 @@ class EnergySamples:
         Children's classification scores.
     target : ndarray of float64, shape (n,)
     origin : list of str
-        ``scene/step/node`` of each proposal (node 0 is the segment, k > 0 its part k).
+        ``scene/step/node`` of each proposal (node 0 is the segment, k > 0 its part k);
+        proposals with the same origin compete at one node. Empty: each its own node.
+    quality : ndarray of float64, optional
+        :func:`proposal_quality` of each proposal (ranks equal targets at one node).
     """
 
     sizes: list[IntArray]
@@ -179,9 +212,43 @@ class EnergySamples:
     scores: list[FloatArray]
     target: FloatArray
     origin: list[str] = field(default_factory=list)
+    quality: FloatArray | None = None
 
     def __len__(self) -> int:
         return len(self.target)
+
+
+def right_paths(samples: EnergySamples) -> npt.NDArray[np.bool_]:
+    """Which proposals took the right path: good (target >= :data:`GOOD_TARGET`) and the
+    best of the proposals made at their node, ranked by target, then by
+    :func:`proposal_quality` (ties all count).
+
+    On a curved arcade S2 and S3 may both match every arch (target 1) while S3's bays
+    are the closer ones: S3 took the right path there, S2 did not.
+
+    Examples
+    --------
+    >>> s = EnergySamples(sizes=[np.array([5, 5])] * 3, n_parent=np.full(3, 10),
+    ...                   parent_class=np.full(3, 4), sequence=np.array([1, 2, 3]),
+    ...                   scores=[np.ones(2)] * 3, target=np.array([0.0, 1.0, 1.0]),
+    ...                   origin=["a/0", "a/0", "a/0"], quality=np.array([0.0, 0.76, 0.96]))
+    >>> right_paths(s).tolist()
+    [False, False, True]
+    """
+    good = samples.target >= GOOD_TARGET
+    n = len(samples)
+    quality = samples.quality if samples.quality is not None else np.zeros(n)
+    origin = samples.origin if len(samples.origin) == n else [str(i) for i in range(n)]
+    right = np.zeros(n, dtype=bool)
+    nodes: dict[str, list[int]] = {}
+    for i, o in enumerate(origin):
+        nodes.setdefault(o, []).append(i)
+    for members in nodes.values():
+        keys = [(float(samples.target[i]), float(quality[i])) for i in members]
+        top = max(keys)
+        for i, key in zip(members, keys, strict=True):
+            right[i] = bool(good[i]) and key == top
+    return right
 
 
 def fit_energy(samples: EnergySamples, *, n_min: int = 20_000, seed: int = 0,
@@ -203,11 +270,12 @@ def fit_energy(samples: EnergySamples, *, n_min: int = 20_000, seed: int = 0,
     (True, True)
     """
     good = samples.target >= GOOD_TARGET
-    # Shrunk towards the overall rate of good proposals (2 pseudo-proposals).
-    p0 = float(good.mean()) if len(good) else 0.5
+    right = right_paths(samples)
+    # Shrunk towards the overall rate of right proposals (2 pseudo-proposals).
+    p0 = float(right.mean()) if len(right) else 0.5
     num = np.full((NUM_CLASSES, 3), 2.0 * p0)
     den = np.full((NUM_CLASSES, 3), 2.0)
-    for k, n, g in zip(samples.parent_class, samples.sequence, good, strict=True):
+    for k, n, g in zip(samples.parent_class, samples.sequence, right, strict=True):
         num[k, n - 1] += float(g)
         den[k, n - 1] += 1.0
     prior = num / den
@@ -232,8 +300,8 @@ def fit_energy(samples: EnergySamples, *, n_min: int = 20_000, seed: int = 0,
     # Midway between the chosen cut and the highest xi below it (a margin both ways).
     below = pred[pred < best_t]
     thr = 0.5 * (best_t + float(below.max())) if len(below) else best_t
-    meta = {"n_samples": len(samples), "n_good": int(good.sum()), "balanced_accuracy": best_acc,
-            "good_target": GOOD_TARGET} | (info or {})
+    meta = {"n_samples": len(samples), "n_good": int(good.sum()), "n_right": int(right.sum()),
+            "balanced_accuracy": best_acc, "good_target": GOOD_TARGET} | (info or {})
     return EnergyModel(weights=tuple(float(x) for x in w), prior=tuple(tuple(float(x) for x in r) for r in prior),
                        n_min=n_min, threshold=thr, r2=r2, seed=seed, info=meta)
 
@@ -265,7 +333,7 @@ def collect_samples(
 ) -> EnergySamples:
     """Proposals on every training segment and on each of its parts, with their targets."""
     params = params or SequenceParams()
-    sizes, npar, pcls, seqs, scores, target, origin = [], [], [], [], [], [], []
+    sizes, npar, pcls, seqs, scores, target, origin, quality = [], [], [], [], [], [], [], []
     for i, (name, cls, how) in enumerate(segments):
         for j, step in enumerate(steps):
             xyz, gcls, ginst = _scan_points(name, step=step, seed=seed + 7 * i + j)
@@ -283,25 +351,29 @@ def collect_samples(
                 if classifier is None:
                     pc = int(_oracle([lab[idx]])[0][0])
                 else:
-                    pc = int(classifier.predict([sub])[0][0])
+                    pc_cls, _, _ = classifier.predict([sub])  # unpacked: HollowNet's Prediction
+                    pc = int(np.asarray(pc_cls).reshape(-1)[0])
                 for pr in props.values():
                     if pr is None:
                         continue
                     if classifier is None:
                         sc = _oracle([lab[idx][c] for c in pr.children])[1]
                     else:
-                        sc = np.asarray(classifier.predict([sub[c] for c in pr.children])[1])
+                        _, c_sc, _ = classifier.predict([sub[c] for c in pr.children])
+                        sc = np.asarray(c_sc, dtype=np.float64)
                     sizes.append(np.array([len(c) for c in pr.children]))
                     npar.append(len(idx))
                     pcls.append(int(pc))
                     seqs.append(pr.sequence)
                     scores.append(np.asarray(sc, dtype=np.float64))
                     target.append(proposal_target(pr.children, part[idx]))
+                    quality.append(proposal_quality(pr.children, part[idx]))
                     origin.append(f"{name}/{step}/{k}")
     return EnergySamples(sizes=sizes, n_parent=np.asarray(npar, dtype=np.int64),
                          parent_class=np.asarray(pcls, dtype=np.int64),
                          sequence=np.asarray(seqs, dtype=np.int64), scores=scores,
-                         target=np.asarray(target, dtype=np.float64), origin=origin)
+                         target=np.asarray(target, dtype=np.float64), origin=origin,
+                         quality=np.asarray(quality, dtype=np.float64))
 
 
 def fit_energy_from_scenes(
@@ -333,6 +405,9 @@ def fit_energy_from_scenes(
     info = {"classifier": "oracle (majority ground-truth class, its share as score)"
             if classifier is None else type(classifier).__name__,
             "target": "(m - 1) / (s - 1): s children, m matched to a part with IoU >= 0.5",
+            "prior": "W[k, n]: share of sequence n's proposals on class-k parents that took the right "
+                     "path (good and best at their node; equal targets ranked by the matched "
+                     "children's mean IoU), shrunk by 2 pseudo-proposals",
             "scenes": [s[0] for s in TRAINING_SEGMENTS], "steps_deg": list(steps),
             "seconds": round(time.perf_counter() - t0, 1)}
     return fit_energy(samples, n_min=n_min, seed=seed, info=info)

@@ -51,8 +51,17 @@ RngLike = int | np.random.Generator | np.random.SeedSequence | None
 
 #: Polygons tried by :func:`psi` after the circle (square, hexagonal, octagonal plans).
 DEFAULT_SIDES: tuple[int, ...] = (4, 6, 8)
-#: Points used to score RANSAC hypotheses (the final fit uses every point).
-_SCORE_SAMPLE = 4096
+#: ``psi``, ``fit_circle`` and ``fit_ngon`` work on a random sample of at most this many
+#: footprint points (hypotheses, refits, inlier fraction and RMS): a 100 k-point segment
+#: costs what a 2 k-point one does.
+_FIT_SAMPLE = 2048
+#: Points of that sample that score the circle hypotheses, and the polygon hypotheses.
+_SCORE_SAMPLE = 1024
+_SCORE_SAMPLE_NGON = 512
+#: Hypotheses scored at a time (the adaptive stop is checked after each batch).
+_CHUNK = 32
+#: Confidence of RANSAC's adaptive stop.
+_CONFIDENCE = 0.999
 
 
 # --------------------------------------------------------------------------- v1, h
@@ -97,15 +106,24 @@ def h(xyz: npt.ArrayLike) -> FloatArray:
     [3.536, 2.121, 0.707, 0.707, 2.121, 3.536]
     """
     a = np.asarray(xyz, dtype=np.float64)
-    xy = a[:, :2] - a[:, :2].mean(axis=0) if len(a) else a[:, :2]
+    if not len(a):
+        return np.empty((0, 2))
+    dx, dy = a[:, 0] - a[:, 0].mean(), a[:, 1] - a[:, 1].mean()
     axis = np.array([1.0, 0.0])
     if len(a) >= 2:
-        w, vecs = np.linalg.eigh(xy.T @ xy)
+        # Element-wise sums, not BLAS dots: a threaded dot of 100 k points can stall on
+        # a loaded machine.
+        sxy = float((dx * dy).sum())
+        w, vecs = np.linalg.eigh(np.array([[float((dx * dx).sum()), sxy], [sxy, float((dy * dy).sum())]]))
         axis = vecs[:, int(np.argmax(w))]
         # Fixed sign, so equal input gives an equal projection.
         if axis[np.argmax(np.abs(axis))] < 0:
             axis = -axis
-    return np.stack([xy @ axis, a[:, 2]], axis=1)
+    out = np.empty((len(a), 2))
+    np.multiply(dx, axis[0], out=out[:, 0])
+    out[:, 0] += dy * axis[1]
+    out[:, 1] = a[:, 2]
+    return out
 
 
 # --------------------------------------------------------------------------- psi
@@ -136,8 +154,9 @@ class TransportCurve:
     rms: float = 0.0
 
     def _polar(self, xy: FloatArray) -> tuple[FloatArray, FloatArray]:
-        d = np.asarray(xy, dtype=np.float64) - np.asarray(self.center)
-        return np.hypot(d[:, 0], d[:, 1]), np.arctan2(d[:, 1], d[:, 0])
+        q = np.asarray(xy, dtype=np.float64)
+        dx, dy = q[:, 0] - self.center[0], q[:, 1] - self.center[1]
+        return np.hypot(dx, dy), np.arctan2(dy, dx)
 
     def _face_angle(self, theta: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Side index and the angle from that side's normal, in [-pi/n, pi/n)."""
@@ -153,18 +172,22 @@ class TransportCurve:
         along the nearest side's normal, so every point of a prism's side has the same
         distance (the apothem).
         """
-        r, theta = self._polar(np.asarray(xy, dtype=np.float64))
+        q = np.asarray(xy, dtype=np.float64)
         if self.n_sides == 0:
-            return r
+            return np.hypot(q[:, 0] - self.center[0], q[:, 1] - self.center[1])
+        r, theta = self._polar(q)
         _, phi = self._face_angle(theta)
         return np.asarray(r * np.cos(phi))
 
     def position(self, xy: npt.ArrayLike) -> FloatArray:
         """Position along the curve, metres from the angle 0 (circle) or from the start of
         side 0 (polygon); in ``[0, perimeter)``."""
-        _, theta = self._polar(np.asarray(xy, dtype=np.float64))
+        q = np.asarray(xy, dtype=np.float64)
+        theta = np.arctan2(q[:, 1] - self.center[1], q[:, 0] - self.center[0])
         if self.n_sides == 0:
-            return np.asarray(np.mod(theta, 2.0 * math.pi) * self.radius)
+            # theta is in [-pi, pi]: one add instead of np.mod (a slow ufunc).
+            theta += np.where(theta < 0.0, 2.0 * math.pi, 0.0)
+            return np.asarray(theta * self.radius)
         t = math.tan(math.pi / self.n_sides)
         k, phi = self._face_angle(theta)
         return np.asarray(self.radius * (2.0 * t * k + t + np.tan(phi)))
@@ -213,11 +236,38 @@ def _kasa(xy: FloatArray) -> tuple[FloatArray, float]:
     return c + m, abs(r)
 
 
+def _span(a: FloatArray) -> FloatArray:
+    """``a.max(axis=0) - a.min(axis=0)`` of an (n, k) array, column by column (NumPy's
+    axis-0 reductions of a narrow C-ordered array are ten times slower)."""
+    if not len(a):
+        return np.zeros(a.shape[1])
+    return np.array([float(a[:, k].max()) - float(a[:, k].min()) for k in range(a.shape[1])])
+
+
 def _threshold(xy: FloatArray, residual_threshold: float | None) -> float:
     if residual_threshold is not None:
         return float(residual_threshold)
-    extent = float(np.hypot(*(xy.max(axis=0) - xy.min(axis=0)))) if len(xy) else 0.0
+    extent = float(np.hypot(*_span(xy)[:2])) if len(xy) else 0.0
     return max(0.02, 0.01 * extent)
+
+
+def _subsample(pts: FloatArray, k: int, rng: np.random.Generator) -> FloatArray:
+    """``pts`` itself when it holds at most ``k`` points, else ``k`` of them drawn without
+    replacement, in random order."""
+    if len(pts) <= k:
+        return pts
+    return pts[rng.choice(len(pts), k, replace=False)]
+
+
+def _trials_needed(inlier_ratio: float, sample_size: int) -> float:
+    """RANSAC's adaptive trial count: hypotheses needed to draw one all-inlier sample of
+    ``sample_size`` points with probability :data:`_CONFIDENCE`."""
+    w = inlier_ratio**sample_size
+    if w >= 1.0:
+        return 1.0
+    if w <= 0.0:
+        return math.inf
+    return math.log(1.0 - _CONFIDENCE) / math.log1p(-w)
 
 
 def fit_circle(
@@ -229,13 +279,21 @@ def fit_circle(
 ) -> TransportCurve | FailedFit:
     """Circle RANSAC on a footprint: 3-point hypotheses, the one with most inliers, refit.
 
+    The fit works on a random sample of at most :data:`_FIT_SAMPLE` footprint points
+    (the threshold uses the whole footprint's extent): hypotheses are scored on
+    :data:`_SCORE_SAMPLE` of them, 32 at a time (squared distances from one matrix
+    product), and the search stops early once the best hypothesis' inlier ratio ``w``
+    makes ``max_trials`` more than enough (``1 - (1 - w^3)^trials >= 0.999``). The best
+    circle is refitted twice on its inliers (Kasa, then Gauss-Newton on the geometric
+    residual); the inlier fraction and RMS are those of the sample.
+
     Parameters
     ----------
     xy : array-like of shape (n_points, 2)
     residual_threshold : float, optional
         Inlier distance, metres; default 1 % of the footprint's diagonal, at least 2 cm.
     max_trials : int
-        Hypotheses drawn.
+        Most hypotheses drawn.
     rng : int, Generator or None
 
     Returns
@@ -255,34 +313,54 @@ def fit_circle(
         return FailedFit(reason=f"a circle needs 3 points; got {len(pts)}")
     rng = np.random.default_rng(rng)
     thr = _threshold(pts, residual_threshold)
-    score = pts if len(pts) <= _SCORE_SAMPLE else pts[rng.choice(len(pts), _SCORE_SAMPLE, replace=False)]
-    idx = rng.integers(0, len(pts), size=(max_trials, 3))
-    centres, radii = _circles_through(pts[idx[:, 0]], pts[idx[:, 1]], pts[idx[:, 2]])
+    fit = _subsample(pts, _FIT_SAMPLE, rng)
+    m = np.array([fit[:, 0].mean(), fit[:, 1].mean()])
+    q = fit - m  # centred: the squared-distance expansion below keeps its precision
+    sc = _subsample(q, _SCORE_SAMPLE, rng)
+    sc2 = (sc**2).sum(axis=1)
+    idx = rng.integers(0, len(q), size=(max_trials, 3))
+    centres, radii = _circles_through(q[idx[:, 0]], q[idx[:, 1]], q[idx[:, 2]])
     ok = np.isfinite(radii) & (radii > thr)
     if not ok.any():
         return FailedFit(reason="every sampled triple is collinear or degenerate")
     centres, radii = centres[ok], radii[ok]
+    lo2, hi2 = (radii - thr) ** 2, (radii + thr) ** 2  # |d - r| < thr, as r > thr
     best, best_count = -1, -1
-    for start in range(0, len(radii), 32):  # bounded memory: 32 x 4096 distances at a time
-        cc, rr = centres[start:start + 32], radii[start:start + 32]
-        dist = np.hypot(score[None, :, 0] - cc[:, 0, None], score[None, :, 1] - cc[:, 1, None])
-        counts = (np.abs(dist - rr[:, None]) < thr).sum(axis=1)
+    for start in range(0, len(radii), _CHUNK):
+        sl = slice(start, start + _CHUNK)
+        cc = centres[sl]
+        d2 = sc2[None, :] - 2.0 * (cc @ sc.T) + (cc**2).sum(axis=1)[:, None]
+        counts = ((d2 > lo2[sl, None]) & (d2 < hi2[sl, None])).sum(axis=1)
         k = int(np.argmax(counts))
         if counts[k] > best_count:
             best, best_count = start + k, int(counts[k])
+        if start + _CHUNK >= _trials_needed(best_count / len(sc), 3):
+            break
     c, r = centres[best], float(radii[best])
     for _ in range(2):  # refit on the inliers, inliers recomputed
-        inl = np.abs(np.hypot(*(pts - c).T) - r) < thr
+        inl = np.abs(np.hypot(q[:, 0] - c[0], q[:, 1] - c[1]) - r) < thr
         if inl.sum() < 3:
             return FailedFit(reason="the best circle has fewer than 3 inliers")
-        c, r = _kasa(pts[inl])
-    res = np.abs(np.hypot(*(pts - c).T) - r)
+        c, r = _kasa(q[inl])
+    res = np.abs(np.hypot(q[:, 0] - c[0], q[:, 1] - c[1]) - r)
     inl = res < thr
     if inl.sum() < 3:
         return FailedFit(reason="the refitted circle has fewer than 3 inliers")
-    return TransportCurve(center=(float(c[0]), float(c[1])), radius=r,
+    return TransportCurve(center=(float(c[0] + m[0]), float(c[1] + m[1])), radius=r,
                           inlier_fraction=float(inl.mean()),
                           rms=float(np.sqrt(np.mean(res[inl] ** 2))))
+
+
+def _polygon_distance(q: FloatArray, c: FloatArray, angle: FloatArray | float,
+                      n_sides: int) -> tuple[FloatArray, FloatArray]:
+    """Polygonal distance of points ``q`` (..., S, 2) from centres ``c`` (..., 2) and the
+    angle of each point's side normal; ``angle`` broadcasts like ``c[..., 0]``."""
+    step = 2.0 * math.pi / n_sides
+    dx, dy = q[..., 0] - c[..., 0, None], q[..., 1] - c[..., 1, None]
+    r, th = np.hypot(dx, dy), np.arctan2(dy, dx)
+    a = np.asarray(angle, dtype=np.float64)[..., None]
+    phi = np.mod(th - a + 0.5 * step, step) - 0.5 * step
+    return r * np.cos(phi), th - phi
 
 
 def fit_ngon(
@@ -299,7 +377,11 @@ def fit_ngon(
     A hypothesis is a centre (from a 3-point circle, or ``start``'s centre), an orientation
     (the phase of the n-th angular harmonic of the radius around that centre: a regular
     polygon's radius peaks at its corners) and an apothem (the median polygonal distance).
-    The hypothesis with most inliers is refined by Gauss-Newton on the inliers' residuals.
+    As :func:`fit_circle`, the fit works on a sample of at most :data:`_FIT_SAMPLE`
+    points, scores hypotheses (``start`` first, then 16 at a time, vectorised) on
+    :data:`_SCORE_SAMPLE_NGON` of them and stops early by the same rule. The hypothesis with
+    most inliers is refined by three Gauss-Newton steps (analytic Jacobian) on the
+    inliers' residuals.
 
     Parameters
     ----------
@@ -328,58 +410,58 @@ def fit_ngon(
         return FailedFit(reason=f"a polygon needs 4 points; got {len(pts)}")
     rng = np.random.default_rng(rng)
     thr = _threshold(pts, residual_threshold)
-    score = pts if len(pts) <= _SCORE_SAMPLE else pts[rng.choice(len(pts), _SCORE_SAMPLE, replace=False)]
-    idx = rng.integers(0, len(pts), size=(max_trials, 3))
-    centres, radii = _circles_through(pts[idx[:, 0]], pts[idx[:, 1]], pts[idx[:, 2]])
+    step = 2.0 * math.pi / n_sides
+    fit = _subsample(pts, _FIT_SAMPLE, rng)
+    m = np.array([fit[:, 0].mean(), fit[:, 1].mean()])
+    q = fit - m
+    sc = _subsample(q, _SCORE_SAMPLE_NGON, rng)
+    idx = rng.integers(0, len(q), size=(max_trials, 3))
+    centres, radii = _circles_through(q[idx[:, 0]], q[idx[:, 1]], q[idx[:, 2]])
     centres = centres[np.isfinite(radii)]
     if start is not None:
-        centres = np.vstack([np.asarray(start.center)[None], centres])
+        centres = np.vstack([np.asarray(start.center, dtype=np.float64)[None] - m, centres])
     if not len(centres):
         return FailedFit(reason="no centre hypothesis")
 
-    def hypothesis(c: FloatArray, sample: FloatArray) -> TransportCurve:
-        d = sample - c
-        r, th = np.hypot(d[:, 0], d[:, 1]), np.arctan2(d[:, 1], d[:, 0])
-        corner = np.angle(np.sum(r * np.exp(1j * n_sides * th))) / n_sides
-        g = TransportCurve(center=(float(c[0]), float(c[1])), radius=1.0, n_sides=n_sides,
-                           angle=float(corner + math.pi / n_sides))
-        a = float(np.median(g.distance(sample)))
-        return TransportCurve(center=g.center, radius=a, n_sides=n_sides, angle=g.angle)
-
-    best, best_count = None, -1
-    for c in centres:
-        g = hypothesis(c, score)
-        count = int((g.residuals(score) < thr).sum())
-        if count > best_count:
-            best, best_count = g, count
-    assert best is not None
-    g = best
+    best_c, best_a, best_ang, best_count = centres[0], 0.0, 0.0, -1
+    for lo in range(0, len(centres), 16):
+        cc = centres[lo:lo + 16]
+        dx, dy = sc[None, :, 0] - cc[:, 0, None], sc[None, :, 1] - cc[:, 1, None]
+        r, th = np.hypot(dx, dy), np.arctan2(dy, dx)
+        # Phase of the n-th harmonic of the radius: the corners' direction.
+        corner = np.arctan2((r * np.sin(n_sides * th)).sum(axis=1),
+                            (r * np.cos(n_sides * th)).sum(axis=1)) / n_sides
+        ang = corner + math.pi / n_sides
+        phi = np.mod(th - ang[:, None] + 0.5 * step, step) - 0.5 * step
+        dist = r * np.cos(phi)
+        apo = np.median(dist, axis=1)
+        counts = (np.abs(dist - apo[:, None]) < thr).sum(axis=1)
+        k = int(np.argmax(counts))
+        if counts[k] > best_count:
+            best_c, best_a, best_ang, best_count = cc[k], float(apo[k]), float(ang[k]), int(counts[k])
+        if lo + 16 >= _trials_needed(best_count / len(sc), 3):
+            break
+    params = np.array([best_c[0], best_c[1], best_a, best_ang])
     for _ in range(3):  # Gauss-Newton on (cx, cy, apothem, angle) over the inliers
-        inl = g.residuals(pts) < thr
+        dist, nrm = _polygon_distance(q, params[:2], params[3], n_sides)
+        inl = np.abs(dist - params[2]) < thr
         if inl.sum() < 4:
             return FailedFit(reason="the best polygon has fewer than 4 inliers")
-        q = pts[inl]
-        params = np.array([g.center[0], g.center[1], g.radius, g.angle])
-
-        def resid(pv: FloatArray, q: FloatArray = q) -> FloatArray:
-            gg = TransportCurve(center=(pv[0], pv[1]), radius=pv[2], n_sides=n_sides, angle=pv[3])
-            return gg.distance(q) - pv[2]
-
-        r0 = resid(params)
-        jac = np.empty((len(q), 4))
-        for j in range(4):
-            dp = np.zeros(4)
-            dp[j] = 1e-6 * max(1.0, abs(params[j]))
-            jac[:, j] = (resid(params + dp) - r0) / dp[j]
-        step = np.linalg.lstsq(jac, -r0, rcond=None)[0]
-        params = params + step
-        g = TransportCurve(center=(float(params[0]), float(params[1])), radius=abs(float(params[2])),
-                           n_sides=n_sides, angle=float(np.mod(params[3], 2 * math.pi / n_sides)))
-    res = g.residuals(pts)
+        qi, ni = q[inl], nrm[inl]
+        cn, sn = np.cos(ni), np.sin(ni)
+        dx, dy = qi[:, 0] - params[0], qi[:, 1] - params[1]
+        jac = np.column_stack([-cn, -sn, -np.ones(len(qi)), -dx * sn + dy * cn])
+        delta = np.linalg.lstsq(jac, -(dist[inl] - params[2]), rcond=None)[0]
+        params = params + delta
+        params[2] = abs(params[2])
+        params[3] = np.mod(params[3], step)
+    dist, _ = _polygon_distance(q, params[:2], params[3], n_sides)
+    res = np.abs(dist - params[2])
     inl = res < thr
     if inl.sum() < 4:
         return FailedFit(reason="the refined polygon has fewer than 4 inliers")
-    return TransportCurve(center=g.center, radius=g.radius, n_sides=n_sides, angle=g.angle,
+    return TransportCurve(center=(float(params[0] + m[0]), float(params[1] + m[1])),
+                          radius=float(params[2]), n_sides=n_sides, angle=float(params[3]),
                           inlier_fraction=float(inl.mean()),
                           rms=float(np.sqrt(np.mean(res[inl] ** 2))))
 
@@ -400,6 +482,10 @@ def psi(
     inliers lie on a straight line as well as on the circle (line RMS below
     ``straightness`` x the circle's RMS, or a radius over 10 x the footprint's size) has no
     transport curve: a straight wall is ``h``'s case, not ``p``'s or ``u``'s.
+
+    One random sample of at most :data:`_FIT_SAMPLE` footprint points serves the circle,
+    every polygon and the straightness test, so their inlier fractions compare on the
+    same points; the threshold and the size come from the whole footprint.
 
     Parameters
     ----------
@@ -426,24 +512,27 @@ def psi(
     """
     pts = np.asarray(xy, dtype=np.float64)
     rng = np.random.default_rng(rng)
-    circle = fit_circle(pts, residual_threshold=residual_threshold, max_trials=max_trials, rng=rng)
+    if len(pts) < 3:
+        return FailedFit(reason=f"a circle needs 3 points; got {len(pts)}")
+    size = float(np.hypot(*_span(pts)[:2]))
+    thr = float(residual_threshold) if residual_threshold is not None else max(0.02, 0.01 * size)
+    fit = _subsample(pts, _FIT_SAMPLE, rng)
+    circle = fit_circle(fit, residual_threshold=thr, max_trials=max_trials, rng=rng)
     if not circle:
         return circle
     assert isinstance(circle, TransportCurve)
-    thr = _threshold(pts, residual_threshold)
-    size = float(np.hypot(*(pts.max(axis=0) - pts.min(axis=0))))
     if circle.radius > 10.0 * max(size, thr):
         return FailedFit(reason=f"footprint is straight (circle radius {circle.radius:.3g} m)")
-    inl = pts[circle.residuals(pts) < thr]
+    inl = fit[circle.residuals(fit) < thr]
     q = inl - inl.mean(axis=0)
-    line_rms = math.sqrt(float(np.linalg.eigvalsh(q.T @ q)[0]) / len(q))
+    line_rms = math.sqrt(max(float(np.linalg.eigvalsh(q.T @ q)[0]), 0.0) / len(q))
     if line_rms < straightness * max(circle.rms, 1e-3 * thr):
         return FailedFit(reason=f"footprint is straight (line RMS {line_rms:.3g} m, "
                                 f"circle RMS {circle.rms:.3g} m)")
     best: TransportCurve = circle
     for n in sides:
-        g = fit_ngon(pts, n_sides=n, start=circle, residual_threshold=thr,
-                     max_trials=max(8, max_trials // 8), rng=rng)
+        g = fit_ngon(fit, n_sides=n, start=circle, residual_threshold=thr,
+                     max_trials=max(8, max_trials // 16 - 1), rng=rng)
         if g and isinstance(g, TransportCurve) and g.inlier_fraction > 1.1 * best.inlier_fraction:
             best = g
     return best
@@ -460,7 +549,10 @@ def p(xyz: npt.ArrayLike, curve: TransportCurve) -> FloatArray:
     [[2.0, 5.0], [0.5, 7.0]]
     """
     a = np.asarray(xyz, dtype=np.float64)
-    return np.stack([curve.distance(a[:, :2]), a[:, 2]], axis=1)
+    out = np.empty((len(a), 2))
+    out[:, 0] = curve.distance(a[:, :2])
+    out[:, 1] = a[:, 2]
+    return out
 
 
 def u(xyz: npt.ArrayLike, curve: TransportCurve) -> FloatArray:
@@ -485,10 +577,14 @@ def u(xyz: npt.ArrayLike, curve: TransportCurve) -> FloatArray:
         gaps = np.diff(np.r_[srt, srt[0] + per])
         k = int(np.argmax(gaps))
         start = srt[(k + 1) % len(srt)]
-        s = np.mod(s - start, per)
+        s = s - start  # in (-per, per): wrap with one add, not np.mod
+        s += np.where(s < 0.0, per, 0.0)
     elif len(s):
         s = np.zeros_like(s)
-    return np.stack([s, a[:, 2]], axis=1)
+    out = np.empty((len(a), 2))
+    out[:, 0] = s
+    out[:, 1] = a[:, 2]
+    return out
 
 
 # --------------------------------------------------------------------------- v2, rho
@@ -670,8 +766,17 @@ def split_at(x: npt.ArrayLike, cuts: npt.ArrayLike) -> list[IntArray]:
     [[0, 3], [2], [1], [4]]
     """
     xs = np.asarray(x, dtype=np.float64)
-    lab = np.searchsorted(np.sort(np.asarray(cuts, dtype=np.float64)), xs, side="right")
-    order = np.argsort(lab, kind="stable")
-    bounds = np.searchsorted(lab[order], np.arange(lab.max() + 2 if len(lab) else 1))
-    out = [order[bounds[i]:bounds[i + 1]].astype(np.int64) for i in range(len(bounds) - 1)]
-    return [c for c in out if len(c)]
+    c = np.sort(np.asarray(cuts, dtype=np.float64))
+    return _groups(np.searchsorted(c, xs, side="right"), len(c) + 1)
+
+
+def _groups(lab: IntArray, n_groups: int) -> list[IntArray]:
+    """Indices of each label ``0..n_groups-1`` (empty groups dropped), each in index
+    order: one stable sort of small integers (a radix sort) and their counts."""
+    if not len(lab):
+        return []
+    small = lab.astype(np.int16 if n_groups < 2**15 else np.int64)
+    order = np.argsort(small, kind="stable")
+    bounds = np.r_[0, np.cumsum(np.bincount(lab, minlength=n_groups))]
+    out = [order[bounds[i]:bounds[i + 1]].astype(np.int64) for i in range(n_groups)]
+    return [g for g in out if len(g)]

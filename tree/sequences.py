@@ -26,11 +26,11 @@ import numpy.typing as npt
 from tree.operators import (
     RngLike,
     TransportCurve,
+    _groups,
     h,
     p,
     psi,
     rho,
-    split_at,
     u,
     v1,
     v2,
@@ -107,49 +107,63 @@ class Proposal:
         return len(self.children)
 
 
-def _merge_small(x: FloatArray, cuts: FloatArray, min_count: int) -> FloatArray:
-    """Drop cuts until every child holds at least ``min_count`` points (the smallest
-    child first, merged with its smaller neighbour)."""
-    cuts = np.sort(cuts)
-    while len(cuts):
-        counts = np.bincount(np.searchsorted(cuts, x, side="right"), minlength=len(cuts) + 1)
+def _merge_small(counts: IntArray, min_count: int) -> IntArray:
+    """Cuts kept (indices into the sorted cuts) once every child holds at least
+    ``min_count`` points: the smallest child first, merged with its smaller neighbour.
+    ``counts`` are the children's point counts between the cuts (one more than cuts);
+    dropping a cut adds up its two children, so the points are counted once."""
+    counts = np.asarray(counts, dtype=np.int64).copy()
+    kept = np.arange(len(counts) - 1)
+    while len(kept):
         k = int(np.argmin(counts))
         if counts[k] >= min_count:
             break
         if k == 0:
             drop = 0
-        elif k == len(cuts):
-            drop = len(cuts) - 1
+        elif k == len(kept):
+            drop = len(kept) - 1
         else:
             drop = k - 1 if counts[k - 1] <= counts[k + 1] else k
-        cuts = np.delete(cuts, drop)
-    return cuts
+        counts[drop] += counts[drop + 1]
+        counts = np.delete(counts, drop + 1)
+        kept = np.delete(kept, drop)
+    return kept
 
 
-def _merge_short_ends(x: FloatArray, cuts: FloatArray) -> FloatArray:
-    """Drop an end cut whose end child is shorter than half the median length of the
-    children (a half pier or an end cap at the end of a wall is not a bay)."""
-    while len(cuts) >= 2:
-        lo, hi = float(x.min()), float(x.max())
-        lengths = np.diff(np.r_[lo, cuts, hi])
+def _merge_short_ends(lo: float, hi: float, cuts: FloatArray) -> IntArray:
+    """Cuts kept (indices into ``cuts``) after dropping each end cut whose end child is
+    shorter than half the median length of the children (a half pier or an end cap at
+    the end of a wall is not a bay); ``lo``, ``hi``: the extent of the points."""
+    a, b = 0, len(cuts)
+    while b - a >= 2:
+        lengths = np.diff(np.r_[lo, cuts[a:b], hi])
         med = float(np.median(lengths))
         if lengths[-1] < 0.5 * med and lengths[-1] <= lengths[0]:
-            cuts = cuts[:-1]
+            b -= 1
         elif lengths[0] < 0.5 * med:
-            cuts = cuts[1:]
+            a += 1
         else:
             break
-    return cuts
+    return np.arange(a, b)
 
 
 def _finish(seq: int, x: FloatArray, cuts: FloatArray, params: SequenceParams,
             curve: TransportCurve | None) -> Proposal | None:
-    cuts = _merge_small(x, cuts, max(1, int(np.ceil(params.min_child_fraction * len(x)))))
-    cuts = _merge_short_ends(x, cuts)
-    children = split_at(x, cuts)
+    """Merge small children and short end children, then split: the points are labelled
+    once (one ``searchsorted``) and the merges work on the children's counts."""
+    cuts = np.sort(np.asarray(cuts, dtype=np.float64))
+    lab = np.searchsorted(cuts, x, side="right")
+    counts = np.bincount(lab, minlength=len(cuts) + 1)
+    kept = _merge_small(counts, max(1, int(np.ceil(params.min_child_fraction * len(x)))))
+    if len(kept) and len(x):
+        kept = kept[_merge_short_ends(float(x.min()), float(x.max()), cuts[kept])]
+    keep = np.zeros(len(cuts), dtype=bool)
+    keep[kept] = True
+    relabel = np.r_[0, np.cumsum(keep)]  # original child -> merged child
+    children = _groups(relabel[lab], len(kept) + 1)
     if len(children) < 2:
         return None
-    return Proposal(sequence=seq, children=tuple(children), cuts=cuts, curve=curve)
+    return Proposal(sequence=seq, children=tuple(children), cuts=cuts[keep], curve=curve)
 
 
 def _as_xyz(xyz: npt.ArrayLike) -> FloatArray:

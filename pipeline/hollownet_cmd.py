@@ -1,0 +1,215 @@
+"""The ``hollowtree train`` and ``hollowtree classify`` subcommands (HollowNet).
+
+``pipeline/cli.py`` adds them with :func:`add_parsers`; until it does, ``python -m
+pipeline.hollownet_cmd train ...`` runs the same commands with the same error handling
+(a :class:`~tiling.errors.PipelineError` becomes one line on stderr and exit code 2).
+
+- ``train [--config FILE] [--epochs N] [--device auto|cpu|cuda] [--out FILE] [--resume]``:
+  builds (or reuses) the cached data set, trains with a progress bar (loss, accuracy), a
+  checkpoint each epoch (``FILE.ckpt``), and prints the confusion matrix (also written
+  as ``.confusion.txt`` and ``.confusion.png`` beside the weights).
+- ``classify INPUT``: INPUT is a LAS/LAZ/PLY file holding one segment, or a run store
+  after ``hollowtree coarse``, whose coarse segments (``coarse/csr``) are classified.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from tiling.errors import ConfigError, InputFileError, PipelineError
+
+__all__ = ["add_parsers", "cmd_classify", "cmd_train", "main"]
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text.replace("_", ""))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive integer; got {value}")
+    return value
+
+
+def add_parsers(sub: Any) -> None:
+    """Add ``train`` and ``classify`` to ``sub`` (the subparsers of ``hollowtree``)."""
+    t = sub.add_parser(
+        "train",
+        help="train HollowNet on scanned synthetic elements (progress, checkpoints, confusion matrix)",
+        description=(
+            "Generate (or reuse) the seeded HollowNet data set of segments cut from synthetic "
+            "scans, train the network with a checkpoint per epoch, and write the weights, a "
+            "JSON report and the confusion matrix (text and PNG). The default config made "
+            "the shipped weights."
+        ),
+    )
+    t.add_argument("--config", type=Path, help="YAML or JSON file of TrainConfig keys (hollownet/train.py)")
+    t.add_argument("--epochs", type=_positive_int, help="epochs (overrides the config)")
+    t.add_argument("--device", choices=["auto", "cpu", "cuda"], default="auto", help="default: auto")
+    t.add_argument("--out", type=Path, default=Path("hollownet.pt"), help="weights file (default hollownet.pt)")
+    t.add_argument("--resume", action="store_true", help="continue from the checkpoint OUT.ckpt")
+    t.add_argument("--data-dir", help="data set cache (default $HOLLOWTREE_CACHE or ~/.cache/hollowtree)")
+    t.add_argument("--overwrite", action="store_true", help="replace an existing weights file")
+    t.add_argument("--no-progress", action="store_true", help="no progress bars")
+    t.set_defaults(func=cmd_train)
+
+    c = sub.add_parser(
+        "classify",
+        help="classify a segment file (LAS/LAZ/PLY) or the coarse segments of a run store",
+        description=(
+            "Print the HollowNet class and score of a segment: a LAS/LAZ/PLY file holding one "
+            "segment, or every coarse segment of a run store made by `hollowtree coarse`."
+        ),
+    )
+    c.add_argument("input", type=Path, help="segment file or run store")
+    c.add_argument("--weights", type=Path, help="weights file (default: the shipped weights)")
+    c.add_argument("--batch-size", type=_positive_int, default=64, help="segments per batch (default 64)")
+    c.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    c.set_defaults(func=cmd_classify)
+
+
+def _read_config(path: Path) -> dict[str, Any]:
+    if not path.is_file():
+        raise InputFileError(f"{path}: no such config file")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        first = str(exc).strip().splitlines()[0]
+        raise ConfigError(f"{path}: not valid YAML or JSON ({first})") from None
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: a training config must be a mapping of keys to values")
+    return data
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    """``hollowtree train``."""
+    from hollownet.train import TrainConfig, train
+
+    data = _read_config(args.config) if args.config else {}
+    if args.epochs is not None:
+        data["epochs"] = args.epochs
+    if args.data_dir:
+        data["data_dir"] = args.data_dir
+    try:
+        config = TrainConfig.from_dict(data)
+    except TypeError as exc:
+        raise ConfigError(f"invalid training config: {exc}") from None
+    report = train(config, out=args.out, device=args.device, resume=args.resume,
+                   overwrite=args.overwrite, progress=not args.no_progress)
+    print(report.summary())
+    return 0
+
+
+def _segment_file(path: Path) -> np.ndarray:
+    from tiling.readers import PointBlock, read_blocks
+
+    return PointBlock.concat(read_blocks(path)).xyz
+
+
+def _store_segments(path: Path) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Coarse segment ids and their points (store-local metres) from ``coarse/csr``."""
+    from tiling.store import RunStore
+
+    store = RunStore.open(str(path))
+    attrs = store.attrs
+    try:
+        names = set(store.unit_arrays("coarse/csr")) if "coarse" in attrs.get("stages", {}) else set()
+    except (KeyError, FileNotFoundError):  # zarr: no such group
+        names = set()
+    if "offsets" not in names or not names & {"xyz", "indices"}:
+        raise PipelineError(f"store {path} has no coarse segments; run `hollowtree coarse {path}` first")
+    offsets = store.read_unit("coarse/csr", ["offsets"])["offsets"].astype(np.int64)
+    scale = np.asarray(attrs["coords"]["scale"], dtype=np.float64)
+    if "xyz" in names:  # the coarse stage stores each segment's coordinates with the CSR
+        pts = store.read_slice("coarse/csr/xyz").astype(np.float64) * scale
+    else:
+        pts = _csr_points_from_tiles(store, path, scale)
+    segs = [pts[offsets[s]:offsets[s + 1]] for s in range(len(offsets) - 1)]
+    return np.arange(1, len(segs) + 1), segs
+
+
+def _csr_points_from_tiles(store: Any, path: Path, scale: np.ndarray) -> np.ndarray:
+    """Points of ``coarse/csr/indices`` looked up in the tiles (every one is a core row of one tile)."""
+    wanted = store.read_unit("coarse/csr", ["indices"])["indices"].astype(np.uint64)
+    index_parts, xyz_parts = [], []
+    for t in store.attrs.get("ingest", {}).get("tiles", []):
+        d = store.read_unit(f"tiles/{int(t)}", ["xyz", "index", "core"])
+        index_parts.append(d["index"][d["core"]])
+        xyz_parts.append(d["xyz"][d["core"]])
+    if not index_parts:
+        return np.zeros((0, 3))
+    index = np.concatenate(index_parts)
+    xyz = np.concatenate(xyz_parts)
+    order = np.argsort(index)
+    index, xyz = index[order], xyz[order]
+    pos = np.searchsorted(index, wanted)
+    if len(wanted) and (pos.max() >= len(index) or not np.array_equal(index[pos], wanted)):
+        raise PipelineError(f"store {path}: coarse/csr names points that no tile holds; rerun `hollowtree coarse`")
+    out: np.ndarray = np.asarray(xyz[pos], dtype=np.float64) * scale
+    return out
+
+
+def cmd_classify(args: argparse.Namespace) -> int:
+    """``hollowtree classify``."""
+    from hollownet.predict import Classifier
+    from tiling.classes import ClassId
+
+    path: Path = args.input
+    if not path.exists():
+        raise InputFileError(f"{path}: no such file or run store")
+    clf = Classifier.get(args.weights, batch_size=args.batch_size)
+    if path.is_dir():
+        ids, segs = _store_segments(path)
+        names = [f"segment {int(i)}" for i in ids]
+    else:
+        segs = [_segment_file(path)]
+        names = [str(path)]
+    pred = clf.predict(segs)
+    rows: list[dict[str, Any]] = [{"segment": name, "n_points": len(s), "class": ClassId(int(c)).label, "score": round(float(sc), 4),
+             **({} if ok else {"note": "degenerate segment"})}
+            for name, s, c, sc, ok in zip(names, segs, pred.class_id, pred.score, pred.valid, strict=True)]
+    if args.json:
+        print(json.dumps(rows, indent=1))
+        return 0
+    width = max([len(r["segment"]) for r in rows] + [7])
+    print(f"{'segment'.ljust(width)}  {'points':>9}  {'class':<8} score")
+    for r in rows:
+        note = f"  ({r['note']})" if "note" in r else ""
+        print(f"{r['segment'].ljust(width)}  {r['n_points']:>9}  {r['class']:<8} {r['score']:.3f}{note}")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``train`` or ``classify`` standalone (``python -m pipeline.hollownet_cmd``)."""
+    parser = argparse.ArgumentParser(prog="hollowtree")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    add_parsers(sub)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        return int(exc.code or 0) if not isinstance(exc.code, str) else 2
+    if args.command is None:
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args))
+    except PipelineError as exc:
+        print(f"hollowtree {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"hollowtree {args.command}: interrupted; rerun with --resume to continue", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
