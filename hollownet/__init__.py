@@ -1,4 +1,4 @@
-"""HollowNet: hollow voxels and the 3D CNN that classifies segments (``docs/hollownet.md``).
+"""HollowNet: hollow voxels and the 3D CNN that classifies segments (``docs/method.md``, "HollowNet").
 
 ``voxels`` (NumPy) turns a segment into a 30^3 grid; ``model`` holds the network, its
 registry and checkpoints; ``predict`` the batched :class:`Classifier` (one per process);

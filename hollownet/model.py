@@ -6,7 +6,7 @@ layers, the last with ``K`` outputs. ``K`` comes from the class vocabulary
 (:mod:`tiling.classes`): every class except ``unclassified`` (the element classes, the
 planar classes and ``other``), in id order: see :data:`OUTPUT_CLASSES`.
 
-Sizes the paper leaves open, chosen to keep the model small and fast (``docs/hollownet.md``):
+Sizes the paper leaves open, chosen to keep the model small and fast (``docs/method.md``, "HollowNet"):
 
 - no padding ("valid" convolutions): 30^3 -> 26^3 -> 11^3; padding would cost 2.4x the
   multiply-adds for voxels that are mostly empty border;
@@ -58,7 +58,7 @@ NUM_OUTPUTS: int = len(OUTPUT_CLASSES)
 #: Layout version of checkpoint files; a file of another version is refused.
 CHECKPOINT_VERSION = 1
 _FORMAT = "hollowtree.hollownet"
-#: The shipped weights (``docs/hollownet.md`` says how they are made).
+#: The shipped weights (``docs/method.md``, "HollowNet" says how they are made).
 DEFAULT_WEIGHTS = Path(__file__).resolve().parent / "weights" / "hollownet-v1.pt"
 
 

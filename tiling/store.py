@@ -279,6 +279,7 @@ class RunStore:
 
     def records(self, stage: str) -> dict[str, dict[str, Any]]:
         """Completion records of ``stage``: unit -> info. Unreadable records are skipped."""
+        self._forget_listings()
         recs = self._root["records"]
         if stage not in set(recs.group_keys()):
             return {}
@@ -293,6 +294,20 @@ class RunStore:
             if info:
                 out[unit] = info
         return out
+
+    def _forget_listings(self) -> None:
+        """Drop cached directory listings of a remote store.
+
+        Records are written by other processes (Dask workers); s3fs and other fsspec
+        filesystems cache listings per instance, so without this a reader would not
+        see records written since its last listing.
+        """
+        if not _is_url(self.url):
+            return
+        fs = getattr(self._root.store, "fs", None)
+        if fs is not None and hasattr(fs, "invalidate_cache"):
+            fs.invalidate_cache()
+        self._fs()[0].invalidate_cache()
 
     def clear_records(self, stage: str) -> None:
         """Forget every record of ``stage``."""
