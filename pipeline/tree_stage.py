@@ -56,13 +56,18 @@ class TreeStageParams:
         HollowNet weights; None = the shipped default.
     seed : int
         Segment ``g`` builds its tree with ``SeedSequence([seed, g])``.
+    roof_min_height : float or None
+        A leaf classed ground or roof is roof when its median height above the local
+        ground (``tree/ground.py``) is at least this many metres, else ground; None keeps
+        HollowNet's class.
     """
 
     max_depth: int = 3
     threshold: float | None = None
-    batch_points: int = 1_000_000
+    batch_points: int = 200_000
     weights: str | None = None
     seed: int = 0
+    roof_min_height: float | None = 1.5
 
     def __post_init__(self) -> None:
         if not (isinstance(self.max_depth, int) and self.max_depth >= 0):
@@ -76,7 +81,7 @@ class TreeStageParams:
     @classmethod
     def from_workflow(cls, section: Any) -> TreeStageParams:
         return cls(max_depth=section.max_depth, threshold=section.threshold, batch_points=section.batch_points,
-                   weights=section.weights, seed=section.seed)
+                   weights=section.weights, seed=section.seed, roof_min_height=section.roof_min_height)
 
 
 def plan_batches(offsets: np.ndarray, batch_points: int) -> list[tuple[int, int]]:
@@ -117,10 +122,16 @@ _NODE_COLUMNS = ("segment", "node_id", "parent", "depth", "sequence", "e1", "e2"
                  "is_leaf", "instance")
 
 
-def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any]) -> dict[str, Any]:
-    """Dask task: the trees of global segments ``segs[0] + 1 .. segs[1]`` (one batch)."""
+def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
+               ground: np.ndarray | None = None) -> dict[str, Any]:
+    """Dask task: the trees of global segments ``segs[0] + 1 .. segs[1]`` (one batch).
+
+    ``ground``: the local ground level of each of these segments, in the store's
+    coordinates (``tree.ground.ground_levels``); used when ``roof_min_height`` is set.
+    """
     from hollownet.predict import Classifier
     from tree.build import build_tree
+    from tree.ground import ground_or_roof
 
     store = RunStore.open(url, mode="a")
     params = TreeStageParams(**cfg["params"])
@@ -142,17 +153,22 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any]) -> 
         res = build_tree(pts - pts.mean(axis=0), clf, max_depth=params.max_depth, threshold=params.threshold,
                          rng=np.random.SeedSequence([params.seed, s + 1]))
         leaf[a:z] = res.leaf
-        cls[a:z] = res.class_id
+        if params.roof_min_height is not None and ground is not None:
+            res_class = ground_or_roof(res.class_id, pts[:, 2], res.leaf, float(ground[s - segs[0]]),
+                                       params.roof_min_height)
+        else:
+            res_class = res.class_id
+        cls[a:z] = res_class
         inst[a:z] = np.where(res.instance > 0, res.instance + n_inst, 0)
         score[a:z] = res.score
         node_inst = np.zeros(len(res.nodes), np.int64)
         node_inst[res.instance_node] = np.arange(1, len(res.instance_node) + 1) + n_inst
         n_inst += len(res.instance_node)
         # Planar classes are one instance per class and coarse segment (METHOD.md, "Classes").
-        planar = np.isin(res.class_id, _PLANAR) & (res.instance == 0)
-        for c in np.unique(res.class_id[planar]).tolist():
+        planar = np.isin(res_class, _PLANAR) & (res.instance == 0)
+        for c in np.unique(res_class[planar]).tolist():
             n_inst += 1
-            inst[a:z][planar & (res.class_id == c)] = n_inst
+            inst[a:z][planar & (res_class == c)] = n_inst
         d = res.nodes.to_dict()
         m = len(res.nodes)
         cols["segment"] += [s + 1] * m
@@ -187,6 +203,20 @@ class TreeReport:
                 f"{self.n_instances:,} element instances; {self.seconds:.1f} s")
 
 
+def _ground_levels(store: RunStore) -> np.ndarray:
+    """Local ground level of every global segment (row g-1 for segment g), in the
+    store's coordinates, from the coarse segment table's bounding boxes."""
+    from tree.ground import ground_levels
+
+    t = _read_table(store, "coarse/segments.parquet")
+    cols = {c: np.asarray(t.column(c).to_numpy(), dtype=np.float64)
+            for c in ("segment", "xmin", "ymin", "zmin", "xmax", "ymax", "zmax", "n_points")}
+    order = np.argsort(cols["segment"], kind="stable")
+    bbox = np.stack([cols[c][order] for c in ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax")], axis=1)
+    z0 = float(store.attrs["coords"]["offset"][2])
+    return ground_levels(bbox, n_points=cols["n_points"][order], min_points=200) - z0
+
+
 def run_tree(url: str, params: TreeStageParams, *, runner: Any) -> TreeReport:
     """Run the tree stage on a store whose coarse stage is complete (resumable per batch)."""
     t0 = time.perf_counter()
@@ -205,7 +235,9 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any) -> TreeReport:
     batches = plan_batches(offsets, params.batch_points)
     done = {k: v for k, v in store.records(STAGE).items() if v.get("params_hash") == h}
     todo = [b for b in range(len(batches)) if str(b) not in done]
-    results = runner(tree_batch, [(url, b, batches[b], cfg) for b in todo], "tree: batches")
+    ground = _ground_levels(store) if todo and params.roof_min_height is not None else None
+    results = runner(tree_batch, [(url, b, batches[b], cfg, None if ground is None else ground[slice(*batches[b])])
+                                  for b in todo], "tree: batches")
     for b, info in zip(todo, results, strict=True):
         done[str(b)] = info
     infos = [done[str(b)] for b in range(len(batches))]

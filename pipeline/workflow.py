@@ -118,9 +118,11 @@ class TreeSection(_Section):
     enabled: bool = Field(True, description="run the tree + HollowNet stage")
     max_depth: Annotated[int, Field(ge=0)] = Field(3, description="maximum depth d of Algorithm 1")
     threshold: float | None = Field(None, description="a split is kept when its energy xi >= this; null = the fitted model's")
-    batch_points: PosInt = Field(1_000_000, description="points per tree task (small segments are batched)")
+    batch_points: PosInt = Field(200_000, description="points per tree task (small segments are batched)")
     weights: str | None = Field(None, description="HollowNet weights file; null = the shipped default")
     seed: int = Field(0, description="segment g builds its tree with seed [seed, g]")
+    roof_min_height: Annotated[float, Field(ge=0)] | None = Field(
+        1.5, description="a part classed ground or roof is roof when its median height above the local ground is at least this (m); null = HollowNet's class as it is")
 
 
 class ClusterSection(_Section):
