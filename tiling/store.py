@@ -18,6 +18,7 @@ from __future__ import annotations
 import io
 import logging
 import os
+import time
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -138,9 +139,22 @@ class RunStore:
         self._root.attrs.update(dict(values))
 
     # ------------------------------------------------------------------ tiles
+    def _require_group(self, path: str) -> zarr.Group:
+        """``require_group`` that tolerates a concurrent writer: two Dask workers may
+        create the same parent group (``records/<stage>``, ``tree/batches``) at the same
+        moment, and the loser's ``require_group`` raises; it then finds the group there."""
+        for attempt in range(5):
+            try:
+                return self._root.require_group(path)
+            except Exception:
+                if attempt == 4:
+                    raise
+                time.sleep(0.05 * (attempt + 1))
+        raise AssertionError("unreachable")
+
     def write_unit(self, group: str, arrays: Mapping[str, npt.NDArray[Any]]) -> None:
         """Write ``arrays`` into group path ``group`` (replacing what was there)."""
-        g = self._root.require_group(group)
+        g = self._require_group(group)
         for name in list(g.array_keys()):
             if name not in arrays:
                 del g[name]
@@ -160,7 +174,7 @@ class RunStore:
 
     def unit_writer(self, group: str) -> _UnitWriter:
         """An appending writer for group path ``group`` (its old arrays are removed)."""
-        g = self._root.require_group(group)
+        g = self._require_group(group)
         for name in list(g.array_keys()):
             del g[name]
         return _UnitWriter(g)
@@ -182,7 +196,7 @@ class RunStore:
         Writers then fill it with :meth:`write_slice`, each writing whole chunks only.
         """
         group, _, name = path.rpartition("/")
-        g = self._root.require_group(group) if group else self._root
+        g = self._require_group(group) if group else self._root
         g.create_array(name, shape=shape, dtype=dtype, chunks=(chunks, *shape[1:]),
                        compressors=_COMPRESSOR, fill_value=0, overwrite=True)
 
@@ -273,7 +287,7 @@ class RunStore:
     # ------------------------------------------------------------------ records
     def record(self, stage: str, unit: str, info: Mapping[str, Any]) -> None:
         """Record unit ``unit`` of ``stage`` as done. Call only after its data is written."""
-        g = self._root["records"].require_group(stage)
+        g = self._require_group(f"records/{stage}")
         # One write of one small object: the group and its attributes together.
         g.create_group(str(unit), attributes=dict(info), overwrite=True)
 

@@ -1,0 +1,157 @@
+"""End-to-end scaling of ``hollowtree run``: wall time and peak memory per stage at several sizes.
+
+For each size N it makes (once, not timed) a synthetic Wazir Khan scan of about N points,
+then runs ``hollowtree run`` on the bundled default workflow with the input, the store
+and the outputs overridden, as a child command whose processes (the local Dask cluster's
+workers included) are sampled every 0.2 s. Per stage (the lines the run prints as each
+stage ends) it reports seconds, input points per second per core, the peak resident
+memory of the largest single process and of all processes together. At the end it prints
+the issue's two ratios, measured side by side in this one run:
+
+- time per point at the largest size over time per point at the smallest (linear = 1);
+- peak single-process memory at the largest size over that at the second largest
+  (flat = 1).
+
+Run: ``python benchmarks/bench_scale.py [--sizes 1e6 1e7 1e8] [--workflow workflows/local.yaml]
+[--set key=value ...] [--json FILE]``. Scans are cached in ``out/`` by the workflow's
+``input.synth.out`` pattern; stores are written to ``out/scale-<N>.zarr`` and deleted
+first.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import psutil
+
+REPO = Path(__file__).resolve().parents[1]
+STAGES = ("ingest", "coarse", "tree", "labels", "outputs")
+
+
+def _tree_rss(proc: psutil.Process) -> tuple[int, int]:
+    try:
+        procs = [proc, *proc.children(recursive=True)]
+    except psutil.NoSuchProcess:
+        return 0, 0
+    rss = []
+    for p in procs:
+        try:
+            rss.append(p.memory_info().rss)
+        except psutil.NoSuchProcess:
+            pass
+    return (max(rss) if rss else 0), sum(rss)
+
+
+def measure(cmd: list[str]) -> tuple[int, float, list[dict[str, float]]]:
+    """Run ``cmd``; per stage line: name, seconds since the previous one, peaks (bytes)."""
+    t0 = time.perf_counter()
+    child = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                             env=dict(os.environ, PYTHONPATH=str(REPO)))
+    ps = psutil.Process(child.pid)
+    peak = {"max": 0, "sum": 0}
+    lock = threading.Lock()
+    stop = threading.Event()
+
+    def sample() -> None:
+        while not stop.is_set():
+            m, s = _tree_rss(ps)
+            with lock:
+                peak["max"], peak["sum"] = max(peak["max"], m), max(peak["sum"], s)
+            time.sleep(0.2)
+
+    th = threading.Thread(target=sample, daemon=True)
+    th.start()
+    rows: list[dict[str, float]] = []
+    last = t0
+    assert child.stdout is not None
+    for line in child.stdout:
+        sys.stdout.write("    " + line)
+        name = line.split(":")[0].strip()
+        if name in STAGES and (not rows or rows[-1]["stage"] != name):
+            now = time.perf_counter()
+            with lock:
+                rows.append({"stage": name, "seconds": now - last, "peak_process": peak["max"],
+                             "peak_sum": peak["sum"]})
+                peak["max"], peak["sum"] = 0, 0
+            last = now
+        elif name in STAGES:  # a second line of the same stage (outputs)
+            now = time.perf_counter()
+            with lock:
+                rows[-1]["seconds"] += now - last
+                rows[-1]["peak_process"] = max(rows[-1]["peak_process"], peak["max"])
+                rows[-1]["peak_sum"] = max(rows[-1]["peak_sum"], peak["sum"])
+            last = now
+    child.wait()
+    stop.set()
+    th.join()
+    return child.returncode, time.perf_counter() - t0, rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", nargs="+", type=float, default=[1e6, 1e7, 1e8])
+    ap.add_argument("--workflow", type=Path, default=REPO / "workflows" / "local.yaml")
+    ap.add_argument("--set", dest="overrides", action="append", default=[])
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args()
+    sys.path.insert(0, str(REPO))
+    from pipeline.run import make_synthetic_input
+    from pipeline.workflow import load_workflow
+    from tiling.readers import probe
+
+    cores = os.cpu_count() or 1
+    results = []
+    for size in args.sizes:
+        n = int(size)
+        store = REPO / "out" / f"scale-{n}.zarr"
+        sets = [f"input.synth.points={n}", f"store={store}", "outputs.las=null", "outputs.png=null",
+                "outputs.parquet=null", *args.overrides]
+        wf = load_workflow(args.workflow, sets)
+        t0 = time.perf_counter()
+        made = make_synthetic_input(wf, progress=True)
+        if made:
+            print(f"{n:,} points: input made in {time.perf_counter() - t0:.1f} s (not counted)")
+        if store.exists():
+            shutil.rmtree(store)
+        cmd = [sys.executable, "-m", "pipeline.cli", "run", str(args.workflow), "--no-progress"]
+        for s in sets:
+            cmd += ["--set", s]
+        print(f"{n:,} points: {' '.join(cmd[2:])}")
+        rc, wall, rows = measure(cmd)
+        if rc != 0:
+            raise SystemExit(f"run of {n:,} points failed with exit code {rc}")
+        n_in = sum(probe(p).point_count for p in wf.input.paths())
+        results.append({"points": n_in, "wall_s": wall, "stages": rows})
+        shutil.rmtree(store, ignore_errors=True)
+
+    print(f"\nmachine: {cores} cores, {psutil.virtual_memory().total / 2**30:.0f} GiB")
+    print(f"{'points':>12} {'stage':<8}{'s':>9}{'pts/s/core':>12}{'peak proc MB':>14}{'peak sum MB':>13}")
+    for r in results:
+        for row in r["stages"]:
+            rate = r["points"] / row["seconds"] / cores if row["seconds"] > 0 else float("inf")
+            print(f"{r['points']:>12,} {row['stage']:<8}{row['seconds']:>9.1f}{rate:>12,.0f}"
+                  f"{row['peak_process'] / 2**20:>14.0f}{row['peak_sum'] / 2**20:>13.0f}")
+        peak = max(x["peak_process"] for x in r["stages"])
+        print(f"{r['points']:>12,} {'total':<8}{r['wall_s']:>9.1f}{r['points'] / r['wall_s']:>12,.0f} pts/s "
+              f"(all cores); peak process {peak / 2**20:.0f} MB")
+    if len(results) >= 2:
+        a, b = results[0], results[-1]
+        lin = (b["wall_s"] / b["points"]) / (a["wall_s"] / a["points"])
+        print(f"time per point, {b['points']:,} over {a['points']:,}: {lin:.2f} (linear = 1)")
+        c = results[-2]
+        pk = max(x["peak_process"] for x in b["stages"]) / max(x["peak_process"] for x in c["stages"])
+        print(f"peak single-process memory, {b['points']:,} over {c['points']:,}: {pk:.2f} (flat = 1)")
+    if args.json:
+        args.json.write_text(json.dumps({"cores": cores, "results": results}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
