@@ -60,9 +60,10 @@ MAX_CLASSIFY_POINTS = 2_000_000
 NOTES = {
     "ransac": "stitched RANSAC primitives (tile segments with identical fits, joined across tiles through the "
               "global coarse segments); points of no primitive and RANSAC inliers that DBSCAN left as noise "
-              "are unlabelled; each primitive classified whole by HollowNet and taken as one instance",
-    "ransac+dbscan": "global coarse segments (free segments included), each classified whole by HollowNet and "
-                     "taken as one instance",
+              "are unlabelled; each primitive classified whole by HollowNet (ground or roof by height, as in the tree "
+              "stage) and taken as one instance",
+    "ransac+dbscan": "global coarse segments (free segments included), each classified whole by HollowNet "
+                     "(ground or roof by height, as in the tree stage) and taken as one instance",
     "tree": "labels/class and labels/instance of the full pipeline",
 }
 
@@ -131,8 +132,17 @@ def primitive_groups(store: RunStore) -> tuple[np.ndarray, int]:
     return group_of, int(group_of.max(initial=0))
 
 
-def _classify_groups(store: RunStore, group_of: np.ndarray, n_groups: int, clf: Any, *, seed: int = 0) -> np.ndarray:
-    """HollowNet class of every group of global segments (index 0: class 0)."""
+def _classify_groups(store: RunStore, group_of: np.ndarray, n_groups: int, clf: Any, *, seed: int = 0,
+                     ground: np.ndarray | None = None, roof_min_height: float | None = None) -> np.ndarray:
+    """HollowNet class of every group of global segments (index 0: class 0).
+
+    With ``ground`` (the local ground level of every global segment, index 0 unused,
+    store coordinates) and ``roof_min_height``, a group classed ground or roof is
+    decided by its median height as the tree stage decides a leaf
+    (``tree.ground.ground_or_roof``), so the baselines get the same correction.
+    """
+    from tree.ground import ground_or_roof
+
     offsets = store.read_unit("coarse/csr", ["offsets"])["offsets"]
     scale = np.asarray(store.attrs["coords"]["scale"])
     order = np.argsort(group_of, kind="stable")
@@ -141,12 +151,23 @@ def _classify_groups(store: RunStore, group_of: np.ndarray, n_groups: int, clf: 
     rng = np.random.default_rng(seed)
     batch: list[np.ndarray] = []
     ids: list[int] = []
+    batch_z: list[np.ndarray] = []
+    batch_ground: list[float] = []
 
     def flush() -> None:
         if batch:
-            out[np.asarray(ids)] = clf.predict(batch).class_id
+            cls = np.asarray(clf.predict(batch).class_id, dtype=np.uint8)
+            if ground is not None and roof_min_height is not None:
+                for j, gid in enumerate(ids):
+                    z = batch_z[j]
+                    if len(z):
+                        cls[j] = ground_or_roof(cls[j:j + 1], np.array([np.median(z)]), np.zeros(1, np.int64),
+                                                float(batch_ground[j]), roof_min_height)[0]
+            out[np.asarray(ids)] = cls
             batch.clear()
             ids.clear()
+            batch_z.clear()
+            batch_ground.clear()
 
     for gid in range(1, n_groups + 1):
         segs = order[bounds[gid]:bounds[gid + 1]]
@@ -157,6 +178,8 @@ def _classify_groups(store: RunStore, group_of: np.ndarray, n_groups: int, clf: 
         pts = xyz.astype(np.float64) * scale
         batch.append(pts - pts.mean(axis=0) if len(pts) else pts)
         ids.append(gid)
+        batch_z.append(pts[:, 2])
+        batch_ground.append(float(ground[segs].min()) if ground is not None and len(segs) else 0.0)
         if sum(len(b) for b in batch) >= MAX_CLASSIFY_POINTS:
             flush()
     flush()
@@ -203,8 +226,15 @@ def evaluate_store(
     n_seg = len(group_of) - 1
     clf = Classifier.get((attrs.get("workflow", {}).get("tree") or {}).get("weights"))
     say(f"evaluate: {name}: classifying {n_seg:,} coarse segments and {n_groups:,} RANSAC primitives with HollowNet")
-    seg_class = _classify_groups(store, np.arange(n_seg + 1), n_seg, clf)
-    prim_class = _classify_groups(store, group_of, n_groups, clf)
+    roof_min_height = (attrs.get("workflow", {}).get("tree") or {}).get("roof_min_height")
+    ground = None
+    if roof_min_height is not None:
+        from pipeline.tree_stage import _ground_levels
+
+        ground = np.r_[np.inf, _ground_levels(store)]  # index 0: no segment
+    seg_class = _classify_groups(store, np.arange(n_seg + 1), n_seg, clf, ground=ground,
+                                 roof_min_height=roof_min_height)
+    prim_class = _classify_groups(store, group_of, n_groups, clf, ground=ground, roof_min_height=roof_min_height)
     say(f"evaluate: {name}: scoring {n_total:,} points")
     acc = {m: LabelCounts.empty() for m in METHODS}
     rng = np.random.default_rng(0)

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.tree_stage import TREE_ALGORITHM
 from pipeline.workflow import Workflow
 from tiling.classes import CLASS_NAMES
 
@@ -44,7 +45,8 @@ def _stage_params(wf: Workflow) -> dict[str, dict[str, Any]]:
     return {
         "ingest": {"inputs": [str(p) for p in wf.input.paths()], **wf.ingest.model_dump(mode="json")},
         "coarse": wf.coarse.model_dump(mode="json"),
-        "tree": wf.tree.model_dump(mode="json"),
+        # the algorithm's version too: a rerun after a change of the tree's code redoes it
+        "tree": {**wf.tree.model_dump(mode="json"), "algorithm": TREE_ALGORITHM},
         "labels": {},
     }
 

@@ -38,6 +38,9 @@ from tiling.store import RunStore
 __all__ = ["TreeStageParams", "tree_batch", "run_tree", "TreeReport", "plan_batches"]
 
 STAGE = "tree"
+#: Version of the tree's algorithm (tree/): part of the stage's parameters hash and of the
+#: workflow parameters a run records, so a store made by an older version is redone.
+TREE_ALGORITHM = "tree-v2"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -226,7 +229,7 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any) -> TreeReport:
     coarse = stages.get("coarse", {})
     if not coarse or coarse.get("done") != coarse.get("units"):
         raise PipelineError(f"store {url}: the coarse stage is not complete; run it first")
-    h = hashlib.sha256(json.dumps([params.to_dict(), coarse["params_hash"], "tree-v1"], sort_keys=True)
+    h = hashlib.sha256(json.dumps([params.to_dict(), coarse["params_hash"], TREE_ALGORITHM], sort_keys=True)
                        .encode()).hexdigest()[:16]
     cfg = {"params": params.to_dict(), "params_hash": h}
     if stages.get(STAGE, {}).get("params_hash") not in (None, h):

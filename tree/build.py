@@ -129,6 +129,18 @@ def _classify(classifier: Classifier, parts: list[FloatArray]) -> tuple[IntArray
     return np.asarray(cls, dtype=np.int64).reshape(-1), np.asarray(score, dtype=np.float64).reshape(-1)
 
 
+def _is_flat(pts: FloatArray, params: SequenceParams) -> bool:
+    """Whether a node is a flat horizontal patch (``SequenceParams.flat_ratio``).
+
+    >>> g = np.random.default_rng(0).random((1000, 3)) * [40.0, 20.0, 0.05]
+    >>> _is_flat(g, SequenceParams()), _is_flat(g * [1, 1, 200], SequenceParams())
+    (True, False)
+    """
+    z_lo, z_hi = np.percentile(pts[:, 2], [1.0, 99.0])
+    horizontal = max(float(np.ptp(pts[:, 0])), float(np.ptp(pts[:, 1])))
+    return bool(z_hi - z_lo < max(params.flat_height, params.flat_ratio * horizontal))
+
+
 def build_tree(
     xyz: npt.ArrayLike,
     classifier: Classifier,
@@ -203,6 +215,8 @@ def build_tree(
         if depth[node] >= max_depth or len(idx) < max(params.min_points, 2):
             continue
         pts = a[idx]
+        if _is_flat(pts, params):
+            continue
         node_rng = np.random.default_rng(np.random.SeedSequence([base, node]))
         props = [pr for pr in propose(pts, params=params, rng=node_rng).values() if pr is not None]
         if not props:

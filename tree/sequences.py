@@ -64,6 +64,11 @@ class SequenceParams:
         neighbour across the weaker cut (a peak in a sparse stretch is not a boundary).
     residual_threshold : float or None
         Circle/n-gon RANSAC inlier distance (default: 1 % of the footprint).
+    flat_ratio, flat_height : float
+        A node is flat, and :func:`tree.build.build_tree` does not split it, when its
+        height (1st to 99th percentile of z) is under ``max(flat_height, flat_ratio x
+        its larger horizontal extent)``: a ground or roof patch has no vertical structure
+        for S1 or S3 to cut, and S2 would only follow its point density.
     """
 
     prominence: float = 0.05
@@ -72,6 +77,8 @@ class SequenceParams:
     min_points: int = 30
     min_child_fraction: float = 0.02
     residual_threshold: float | None = None
+    flat_ratio: float = 0.05
+    flat_height: float = 0.5
 
     def to_dict(self) -> dict[str, object]:
         return dict(self.__dict__)

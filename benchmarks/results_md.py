@@ -1,0 +1,66 @@
+"""Markdown tables for docs/results.md from the JSON of ``hollowtree evaluate``.
+
+Run: ``python benchmarks/results_md.py out/evaluate/evaluate.json``. Prints the Table 1
+comparison with the paper, one table per site and method, and the mean IoU summary.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+#: The paper's Table 1 (../shared/METHOD.md): GT / AG / Acc % for arches, domes, minarets.
+PAPER = {
+    "wazir_khan": ("46/19/41.3", "12/12/100", "6/6/100"),
+    "khudabad": ("12/7/58.3", "21/19/90.4", "0/0/NA"),
+    "derawar": ("0/0/NA", "0/0/NA", "38/38/100"),
+    "roman": ("79/77/97.4", "0/0/NA", "0/0/NA"),
+    "temple": ("0/0/NA", "7/7/100", "4/0/0"),
+}
+ELEMENTS = ("arch", "dome", "minaret", "pillar")
+
+
+def _f(v: float | None) -> str:
+    return "NA" if v is None else f"{v:.1f}"
+
+
+def _gaa(c: dict) -> str:
+    return f"{c['n_gt']}/{c['n_found']}/{_f(c['accuracy_pct'])}"
+
+
+def main(path: str) -> None:
+    d = json.loads(Path(path).read_text())
+    sites = d["sites"]
+    print("| site | paper arches | ours arches | paper domes | ours domes | paper minarets | ours minarets |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for s in sites:
+        c = s["methods"]["tree"]["classes"]
+        p = PAPER.get(s["name"], ("-", "-", "-"))
+        print(f"| {s['name']} | {p[0]} | {_gaa(c['arch'])} | {p[1]} | {_gaa(c['dome'])} | {p[2]} | {_gaa(c['minaret'])} |")
+    for s in sites:
+        print(f"\n### {s['name']} ({s['n_points']:,} points, {s['n_segments']} coarse segments, "
+              f"{s['n_primitives']} stitched RANSAC primitives)\n")
+        print("| method | class | GT | AG | Acc % | pred | prec % | point IoU % |")
+        print("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |")
+        for m, ev in s["methods"].items():
+            first = True
+            for name in ("ground", "wall", "roof", *ELEMENTS, "other"):
+                c = ev["classes"][name]
+                if not (c["n_gt"] or c["n_pred"]):
+                    continue
+                print(f"| {m if first else ''} | {name} | {c['n_gt']} | {c['n_found']} | {_f(c['accuracy_pct'])} | "
+                      f"{c['n_pred']} | {_f(c['precision_pct'])} | {_f(c['iou_pct'])} |")
+                first = False
+            n_cls = sum(1 for c in ev["classes"].values() if c["n_gt"] and c["class_id"] != 0)
+            print(f"| | **mean IoU ({n_cls} classes)** | | | | | | **{_f(ev['mean_iou_pct'])}** |")
+    print("\n| site | ransac | ransac+dbscan | tree | tree - ransac+dbscan |")
+    print("| --- | ---: | ---: | ---: | ---: |")
+    for s in sites:
+        m = {k: v["mean_iou_pct"] for k, v in s["methods"].items()}
+        print(f"| {s['name']} | {_f(m['ransac'])} | {_f(m['ransac+dbscan'])} | {_f(m['tree'])} | "
+              f"{m['tree'] - m['ransac+dbscan']:+.1f} |")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1] if len(sys.argv) > 1 else "out/evaluate/evaluate.json")
