@@ -31,23 +31,10 @@ import time
 from pathlib import Path
 
 import psutil
+from _procs import tree_rss
 
 REPO = Path(__file__).resolve().parents[1]
 STAGES = ("ingest", "coarse", "tree", "labels", "outputs")
-
-
-def _tree_rss(proc: psutil.Process) -> tuple[int, int]:
-    try:
-        procs = [proc, *proc.children(recursive=True)]
-    except psutil.NoSuchProcess:
-        return 0, 0
-    rss = []
-    for p in procs:
-        try:
-            rss.append(p.memory_info().rss)
-        except psutil.NoSuchProcess:
-            pass
-    return (max(rss) if rss else 0), sum(rss)
 
 
 def measure(cmd: list[str]) -> tuple[int, float, list[dict[str, float]]]:
@@ -62,7 +49,7 @@ def measure(cmd: list[str]) -> tuple[int, float, list[dict[str, float]]]:
 
     def sample() -> None:
         while not stop.is_set():
-            m, s = _tree_rss(ps)
+            m, s = tree_rss(ps)
             with lock:
                 peak["max"], peak["sum"] = max(peak["max"], m), max(peak["sum"], s)
             time.sleep(0.2)

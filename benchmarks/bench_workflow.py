@@ -23,20 +23,7 @@ import time
 from pathlib import Path
 
 import psutil
-
-
-def _tree_rss(proc: psutil.Process) -> tuple[int, int]:
-    try:
-        procs = [proc, *proc.children(recursive=True)]
-    except psutil.NoSuchProcess:
-        return 0, 0
-    rss = []
-    for p in procs:
-        try:
-            rss.append(p.memory_info().rss)
-        except psutil.NoSuchProcess:
-            pass
-    return (max(rss) if rss else 0), sum(rss)
+from _procs import tree_rss
 
 
 def main() -> None:
@@ -73,7 +60,7 @@ def main() -> None:
 
     def sample() -> None:
         while not stop.is_set():
-            m, s = _tree_rss(ps)
+            m, s = tree_rss(ps)
             peak["max"], peak["sum"] = max(peak["max"], m), max(peak["sum"], s)
             time.sleep(0.2)
 

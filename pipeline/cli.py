@@ -492,7 +492,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"hollowtree {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"hollowtree {args.command}: interrupted; nothing was written", file=sys.stderr)
+        what = ("rerun with --resume to continue" if args.command == "train"
+                else "rerun the same command to resume")
+        print(f"hollowtree {args.command}: interrupted; {what}", file=sys.stderr)
         return 130
 
 

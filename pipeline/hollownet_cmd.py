@@ -16,8 +16,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +24,7 @@ import yaml
 
 from tiling.errors import ConfigError, InputFileError, PipelineError
 
-__all__ = ["add_parsers", "cmd_classify", "cmd_train", "main"]
+__all__ = ["add_parsers", "cmd_classify", "cmd_train"]
 
 
 def _positive_int(text: str) -> int:
@@ -187,29 +185,3 @@ def cmd_classify(args: argparse.Namespace) -> int:
         note = f"  ({r['note']})" if "note" in r else ""
         print(f"{r['segment'].ljust(width)}  {r['n_points']:>9}  {r['class']:<8} {r['score']:.3f}{note}")
     return 0
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``train`` or ``classify`` standalone (``python -m pipeline.hollownet_cmd``)."""
-    parser = argparse.ArgumentParser(prog="hollowtree")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    add_parsers(sub)
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:
-        return int(exc.code or 0) if not isinstance(exc.code, str) else 2
-    if args.command is None:
-        parser.print_help()
-        return 2
-    try:
-        return int(args.func(args))
-    except PipelineError as exc:
-        print(f"hollowtree {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"hollowtree {args.command}: interrupted; rerun with --resume to continue", file=sys.stderr)
-        return 130
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())

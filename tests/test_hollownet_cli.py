@@ -1,4 +1,4 @@
-"""``hollowtree train`` / ``hollowtree classify`` (through pipeline/hollownet_cmd.py)."""
+"""``hollowtree train`` / ``hollowtree classify`` (pipeline/hollownet_cmd.py, through the CLI)."""
 
 from __future__ import annotations
 
@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 from plyfile import PlyData, PlyElement
 
+from pipeline.cli import main
 from pipeline.cli import main as hollowtree
 from pipeline.coarse import CoarseParams, run_coarse
 from pipeline.graph import task_runner
-from pipeline.hollownet_cmd import _csr_points_from_tiles, main
+from pipeline.hollownet_cmd import _csr_points_from_tiles
 from scenes.synth import synth
 from tiling.classes import CLASS_NAMES
 from tiling.ingest import IngestParams, ingest
