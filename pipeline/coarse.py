@@ -297,7 +297,10 @@ def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tupl
     tables = [_read_table(store, f"coarse/tables/{t}.parquet").to_pylist() for t in tiles]
     keys = [(r["tile"], r["segment"]) for tab in tables for r in tab]
     info = {k: r for k, r in zip(keys, (r for tab in tables for r in tab), strict=True)}
-    key_id = {k: i for i, k in enumerate(keys)}
+    # Per tile, local segment id -> row of ``keys`` (a lookup array, not a dict per point).
+    key_rows: dict[int, list[tuple[int, int]]] = {}
+    for i, (tt, s_) in enumerate(keys):
+        key_rows.setdefault(tt, []).append((s_, i))
     uf = UnionFind(len(keys))
     # Rows that another tile also holds: buffer rows and core rows near a core edge.
     border_index, border_key = [], []
@@ -309,8 +312,15 @@ def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tupl
         b = grid.buffer
         near = (~d["core"]) | (world[:, 0] < x0 + b) | (world[:, 0] >= x1 - b) | (world[:, 1] < y0 + b) | (world[:, 1] >= y1 - b)
         near &= seg > 0
+        lut = np.full(int(seg.max(initial=0)) + 1, -1, dtype=np.int64)
+        for s_, i in key_rows.get(t, ()):
+            lut[s_] = i
+        kid_t = lut[seg[near]]
+        if (kid_t < 0).any():
+            raise PipelineError(f"store {store.url}: tile {t} labels points with a segment its table lacks; "
+                                "rerun `hollowtree coarse`")
         border_index.append(d["index"][near].astype(np.int64))
-        border_key.append(np.array([key_id[(t, int(s))] for s in seg[near]], dtype=np.int64))
+        border_key.append(kid_t)
     if border_index:
         idx = np.concatenate(border_index)
         kid = np.concatenate(border_key)
