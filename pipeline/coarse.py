@@ -20,6 +20,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 import tempfile
 import time
 from collections.abc import Sequence
@@ -289,10 +290,29 @@ class CoarseReport:
         )
 
 
+def _pwrite_all(fd: int, values: np.ndarray, at: int) -> None:
+    """Write ``values``' bytes at byte offset ``at`` of file ``fd``, all of them."""
+    view = memoryview(values).cast("B")
+    while len(view):
+        n = os.pwrite(fd, view, at)
+        view, at = view[n:], at + n
+
+
+def _pread_all(fd: int, size: int, at: int) -> np.ndarray:
+    """``size`` bytes from byte offset ``at`` of file ``fd``, as a uint8 array."""
+    out = np.empty(size, dtype=np.uint8)
+    view, done = memoryview(out), 0
+    while done < size:
+        chunk = os.pread(fd, size - done, at + done)
+        if not chunk:
+            raise PipelineError(f"scratch file ended after {done} of {size} bytes")
+        view[done:done + len(chunk)] = chunk
+        done += len(chunk)
+    return out
+
+
 def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tuple[int, int]:
     """Join tile segments over shared buffer points; write global ids, table and CSR."""
-    scale = np.asarray(store.attrs["coords"]["scale"])
-    offset = np.asarray(store.attrs["coords"]["offset"])
     grid = TileGrid.from_dict(store.attrs["grid"])
     tables = [_read_table(store, f"coarse/tables/{t}.parquet").to_pylist() for t in tiles]
     keys = [(r["tile"], r["segment"]) for tab in tables for r in tab]
@@ -302,41 +322,72 @@ def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tupl
     for i, (tt, s_) in enumerate(keys):
         key_rows.setdefault(tt, []).append((s_, i))
     uf = UnionFind(len(keys))
-    # Rows that another tile also holds: buffer rows and core rows near a core edge.
-    border_index, border_key = [], []
-    for t in tiles:
-        d = store.read_unit(f"tiles/{t}", ["xyz", "core", "index"])
-        seg = store.read_unit(f"coarse/tiles/{t}", ["segment"])["segment"]
-        x0, y0, x1, y1 = grid.core_bounds(t)
-        world = d["xyz"][:, :2] * scale[:2] + offset[:2]
-        b = grid.buffer
-        near = (~d["core"]) | (world[:, 0] < x0 + b) | (world[:, 0] >= x1 - b) | (world[:, 1] < y0 + b) | (world[:, 1] >= y1 - b)
-        near &= seg > 0
-        lut = np.full(int(seg.max(initial=0)) + 1, -1, dtype=np.int64)
-        for s_, i in key_rows.get(t, ()):
+    # Every buffer row of a tile is a copy of a core row of one of its 8 neighbours (the
+    # same original index). Match them tile pair by tile pair, so that the driver holds
+    # one tile's buffer rows and one neighbour's core rows at a time, never the scan.
+    present = set(tiles)
+    cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    def keys_of(t: int, seg: np.ndarray) -> np.ndarray:
+        rows = key_rows.get(t, [])
+        lut = np.full(max([int(seg.max(initial=0))] + [s_ for s_, _ in rows]) + 1, -1, dtype=np.int64)
+        for s_, i in rows:
             lut[s_] = i
-        kid_t = lut[seg[near]]
-        if (kid_t < 0).any():
+        kid = lut[seg]
+        if (kid < 0).any():
             raise PipelineError(f"store {store.url}: tile {t} labels points with a segment its table lacks; "
                                 "rerun `hollowtree coarse`")
-        border_index.append(d["index"][near].astype(np.int64))
-        border_key.append(kid_t)
-    if border_index:
-        idx = np.concatenate(border_index)
-        kid = np.concatenate(border_key)
-        order = np.lexsort((kid, idx))
-        idx, kid = idx[order], kid[order]
-        same = idx[1:] == idx[:-1]
-        a, c = kid[:-1][same], kid[1:][same]
-        pairs = np.stack([np.minimum(a, c), np.maximum(a, c)], axis=1)
-        pairs = pairs[pairs[:, 0] != pairs[:, 1]]
-        if len(pairs):
-            uniq, counts = np.unique(pairs, axis=0, return_counts=True)
-            ok = [bool(n >= 3 and _same_primitive(info[keys[i]], info[keys[j]], params))
-                  for (i, j), n in zip(uniq.tolist(), counts.tolist(), strict=True)]
-            sel = uniq[np.asarray(ok, dtype=bool)]
-            if len(sel):
-                uf.union_pairs(sel[:, 0], sel[:, 1])
+        return kid
+
+    def core_rows(t: int) -> tuple[np.ndarray, np.ndarray]:
+        """Original index (sorted) and key row of the segmented core rows of tile ``t``."""
+        if t not in cache:
+            if len(cache) >= 9:
+                cache.pop(next(iter(cache)))
+            d = store.read_unit(f"tiles/{t}", ["core", "index"])
+            seg = store.read_unit(f"coarse/tiles/{t}", ["segment"])["segment"]
+            m = d["core"] & (seg > 0)
+            idx = d["index"][m].astype(np.int64)
+            order = np.argsort(idx)
+            cache[t] = idx[order], keys_of(t, seg[m])[order]
+        return cache[t]
+
+    pair_counts: dict[tuple[int, int], int] = {}
+    for t in tiles:
+        d = store.read_unit(f"tiles/{t}", ["core", "index"])
+        seg = store.read_unit(f"coarse/tiles/{t}", ["segment"])["segment"]
+        m = ~d["core"] & (seg > 0)
+        if not m.any():
+            continue
+        b_idx = d["index"][m].astype(np.int64)
+        b_key = keys_of(t, seg[m])
+        ix, iy = grid.tile_index(t)
+        for jy in (iy - 1, iy, iy + 1):
+            for jx in (ix - 1, ix, ix + 1):
+                if (jx, jy) == (ix, iy) or not (0 <= jx < grid.shape[0] and 0 <= jy < grid.shape[1]):
+                    continue
+                n = grid.tile_id(jx, jy)
+                if n not in present:
+                    continue
+                c_idx, c_key = core_rows(n)
+                if not len(c_idx):
+                    continue
+                pos = np.minimum(np.searchsorted(c_idx, b_idx), len(c_idx) - 1)
+                hit = c_idx[pos] == b_idx
+                if not hit.any():
+                    continue
+                ka, kb = b_key[hit], c_key[pos[hit]]
+                lo, hi = np.minimum(ka, kb), np.maximum(ka, kb)
+                code = lo * len(keys) + hi
+                u, cnt = np.unique(code[lo != hi], return_counts=True)
+                for c_, n_ in zip(u.tolist(), cnt.tolist(), strict=True):
+                    k2 = (c_ // len(keys), c_ % len(keys))
+                    pair_counts[k2] = pair_counts.get(k2, 0) + n_
+    sel = [(i, j) for (i, j), n in sorted(pair_counts.items())
+           if n >= 3 and _same_primitive(info[keys[i]], info[keys[j]], params)]
+    if sel:
+        arr = np.asarray(sel, dtype=np.int64)
+        uf.union_pairs(arr[:, 0], arr[:, 1])
     roots = uf.find(np.arange(len(keys))) if keys else np.zeros(0, np.int64)
     # Global ids 1..G in order of each global segment's lowest core index.
     n_core = np.array([info[k]["n_core"] for k in keys], dtype=np.int64)
@@ -374,8 +425,9 @@ def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tupl
     offsets = np.r_[0, np.cumsum(counts[1:])].astype(np.int64)
     total = int(offsets[-1])
     with tempfile.TemporaryFile() as scratch_i, tempfile.TemporaryFile() as scratch_x:
-        buf = np.memmap(scratch_i, dtype=np.uint64, mode="w+", shape=(max(total, 1),))
-        bxyz = np.memmap(scratch_x, dtype=np.int32, mode="w+", shape=(max(total, 1), 3))
+        # Positioned writes, not a memory map: mapped pages would count in the driver's
+        # resident memory and grow with the scan.
+        fd_i, fd_x = scratch_i.fileno(), scratch_x.fileno()
         cursor = offsets[:-1].copy()
         for t in tiles:
             glob, arrays = tile_global(t)
@@ -392,20 +444,18 @@ def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tupl
                     gg = int(g[a]) - 1
                     span = np.arange(cursor[gg], cursor[gg] + (b - a))
                     pos[rows[a:b]] = span
-                    buf[span[0]:span[-1] + 1] = d["index"][rows[a:b]]
-                    bxyz[span[0]:span[-1] + 1] = d["xyz"][rows[a:b]]
+                    _pwrite_all(fd_i, np.ascontiguousarray(d["index"][rows[a:b]], dtype=np.uint64), int(span[0]) * 8)
+                    _pwrite_all(fd_x, np.ascontiguousarray(d["xyz"][rows[a:b]], dtype=np.int32), int(span[0]) * 12)
                     cursor[gg] += b - a
             store.write_unit(f"coarse/tiles/{t}", {**arrays, "global": glob.astype(np.uint64), "csr_pos": pos})
-        buf.flush()
-        bxyz.flush()
         store.write_unit("coarse/csr", {"offsets": offsets})
         store.create_array("coarse/csr/indices", shape=(total,), dtype=np.uint64)
         store.create_array("coarse/csr/xyz", shape=(total, 3), dtype=np.int32)
         step = 4 * CHUNK_POINTS  # whole chunks, a few tens of MB at a time
         for a in range(0, total, step):
-            store.write_slice("coarse/csr/indices", a, np.asarray(buf[a:a + step]))
-            store.write_slice("coarse/csr/xyz", a, np.asarray(bxyz[a:a + step]))
-        del buf, bxyz
+            m = min(step, total - a)
+            store.write_slice("coarse/csr/indices", a, _pread_all(fd_i, m * 8, a * 8).view(np.uint64))
+            store.write_slice("coarse/csr/xyz", a, _pread_all(fd_x, m * 12, a * 12).view(np.int32).reshape(m, 3))
     # The global table: one row per global segment (the primitive of its largest member).
     members: dict[int, list[dict[str, Any]]] = {}
     for k, g in zip(keys, key_global.tolist(), strict=True):
