@@ -22,19 +22,10 @@ from typing import Any
 import numpy as np
 import yaml
 
+from pipeline.cli import _positive_int
 from tiling.errors import ConfigError, InputFileError, PipelineError
 
 __all__ = ["add_parsers", "cmd_classify", "cmd_train"]
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text.replace("_", ""))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"must be a positive integer; got {value}")
-    return value
 
 
 def add_parsers(sub: Any) -> None:
