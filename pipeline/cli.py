@@ -45,6 +45,10 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _nonnegative_int(text: str) -> int:
+    return 0 if text.strip() == "0" else _positive_int(text)
+
+
 def _float(text: str) -> float:
     try:
         return float(text)
@@ -150,6 +154,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="leave points that no primitive explains unsegmented (default: DBSCAN them too)")
     c.add_argument("--free-min-points", type=_positive_int, default=200,
                    help="smallest free segment, points (default 200)")
+    c.add_argument("--block-points", type=_nonnegative_int, default=1_000_000,
+                   help="segment tiles with more points in x-y blocks of at most this many, "
+                        "joined like tiles (default 1000000; 0 = never)")
     c.add_argument("--seed", type=int, default=0)
     c.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process")
     c.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
@@ -384,6 +391,7 @@ def _cmd_coarse(args: argparse.Namespace) -> int:
         ransac=RansacParams(epsilon=args.epsilon, alpha_deg=args.alpha, min_support=args.min_support),
         cluster_epsilon=args.cluster_epsilon, eps=args.eps, min_samples=args.min_samples, seed=args.seed,
         free_segments=not args.no_free_segments, free_min_points=args.free_min_points,
+        block_points=args.block_points,
     )
     with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
         report = run_coarse(args.store, params, runner=run)

@@ -31,6 +31,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from primitives.blocks import block_context, split_blocks
 from primitives.dbscan import dbscan_segments, default_eps
 from primitives.normals import estimate_normals
 from primitives.ransac import RansacParams, efficient_ransac
@@ -80,6 +81,11 @@ class CoarseParams:
         When two tiles' segments that share points are the same primitive: axes/normals
         within ``angle_tol_deg``, positions within ``distance_tol`` metres, radii within
         ``radius_tol`` (relative).
+    block_points : int
+        A tile with more points is segmented in x-y blocks of at most this many points
+        (each with the tile's buffer width of context around it), joined like tiles, so
+        that a task's memory follows this bound and not the densest spot of the scan
+        (a tile near a scanner station can hold several times the average). 0 = never.
     """
 
     k: int = 16
@@ -93,8 +99,12 @@ class CoarseParams:
     angle_tol_deg: float = 10.0
     distance_tol: float = 0.15
     radius_tol: float = 0.15
+    block_points: int = 1_000_000
 
     def __post_init__(self) -> None:
+        if isinstance(self.block_points, bool) or not isinstance(self.block_points, int) or self.block_points < 0:
+            raise ConfigError(f"The 'block_points' parameter of coarse must be an int in the range [0, inf). "
+                              f"Got {self.block_points!r} instead.")
         if not (isinstance(self.k, int) and self.k >= 3):
             raise ConfigError(f"The 'k' parameter of coarse must be an int in the range [3, inf). Got {self.k!r} instead.")
         if self.eps is not None and not (math.isfinite(self.eps) and self.eps > 0):
@@ -112,6 +122,7 @@ class CoarseParams:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> CoarseParams:
         d = dict(data)
+        d.setdefault("block_points", 0)  # stores written before blocks existed: tiles whole
         d["ransac"] = RansacParams.from_dict(d["ransac"])
         return cls(**d)
 
@@ -123,37 +134,135 @@ def _tile_points(store: RunStore, tile: int, scale: np.ndarray) -> dict[str, np.
     return d
 
 
+def _segment_points(xyz: np.ndarray, params: CoarseParams, eps: float, rng: np.random.Generator
+                    ) -> tuple[np.ndarray, list[dict[str, Any]], np.ndarray]:
+    """Normals, Efficient RANSAC and DBSCAN on one set of points.
+
+    Returns the segment of every point (``1..S``, 0 = unsegmented), the fit of every
+    segment (``fits[s - 1]``: ``kind``, ``params`` as a JSON list, ``rms``; kind
+    ``"free"`` for a cluster of points no primitive explains) and which points have no
+    normal.
+    """
+    n = len(xyz)
+    labels = np.full(n, -1, dtype=np.int64)
+    prims: tuple[Any, ...] = ()
+    no_normal = np.zeros(n, dtype=bool)
+    if n:
+        nr = estimate_normals(xyz, k=params.k)
+        valid = nr.valid
+        no_normal = ~valid
+        if valid.sum() >= params.ransac.min_support:
+            res = efficient_ransac(xyz[valid], nr.normals[valid], **params.ransac.to_dict(), rng=rng)
+            labels[valid] = res.labels
+            prims = res.primitives
+    free = len(prims)  # the group of points no primitive explains
+    groups = np.where(labels < 0, free if params.free_segments else -1, labels)
+    segment = dbscan_segments(xyz, groups, eps=eps, min_samples=params.min_samples) if n else np.zeros(0, np.int64)
+    segment = segment.astype(np.int64, copy=False)
+    if params.free_segments and n:
+        in_free = (groups == free) & (segment > 0)
+        sizes = np.bincount(segment[in_free], minlength=int(segment.max(initial=0)) + 1)
+        segment[in_free & (sizes[segment] < params.free_min_points)] = 0
+    # Dense ids 1..S (DBSCAN may leave gaps after the free filter).
+    has = segment > 0
+    ids, segment[has] = np.unique(segment[has], return_inverse=True)
+    segment[has] += 1
+    seg_group = np.zeros(len(ids), dtype=np.int64)
+    seg_group[segment[has] - 1] = groups[has]
+    fits = [{"kind": "free", "params": "[]", "rms": float("nan")} if g == free else
+            {"kind": prims[g].kind, "params": json.dumps(list(prims[g].params)), "rms": float(prims[g].rms)}
+            for g in seg_group.tolist()]
+    return segment, fits, no_normal
+
+
+def _segment_tile(xyz: np.ndarray, params: CoarseParams, eps: float, tile: int, margin: float
+                  ) -> tuple[np.ndarray, list[dict[str, Any]], int, int]:
+    """Segment a tile whole, or block by block when it holds more than ``block_points``.
+
+    A dense tile (near a scanner station it can hold several times the average) is cut
+    into x-y blocks of at most ``block_points`` points (:func:`primitives.blocks.split_blocks`).
+    Each block is segmented with the points within ``margin`` (the tile's buffer width)
+    around it as context, and the blocks' segments are joined over the context points
+    exactly as tiles are joined over their buffers (at least 3 shared points and the same
+    primitive within the tolerances). Returns segment per point, fits per segment, points
+    without a normal and the number of blocks.
+    """
+    n = len(xyz)
+    cap = params.block_points
+    if not cap or n <= cap:
+        rng = np.random.default_rng(np.random.SeedSequence([params.seed, tile]))
+        seg, fits, no_normal = _segment_points(xyz, params, eps, rng)
+        return seg, fits, int(no_normal.sum()), 1
+    block_of, rects = split_blocks(xyz[:, :2], cap)
+    n_blocks = len(rects)
+    own = np.zeros(n, dtype=np.int64)  # each point's segment within its own block
+    key_base = np.zeros(n_blocks + 1, dtype=np.int64)  # block b's segment s -> key_base[b] + s - 1
+    all_fits: list[dict[str, Any]] = []
+    shared: list[tuple[np.ndarray, np.ndarray]] = []  # (context key, owner's point index)
+    n_invalid = 0
+    for b in range(n_blocks):
+        ctx = block_context(xyz, rects[b], margin)
+        rng = np.random.default_rng(np.random.SeedSequence([params.seed, tile, b]))
+        seg, fits, no_normal = _segment_points(xyz[ctx], params, eps, rng)
+        mine = block_of[ctx] == b
+        n_invalid += int(no_normal[mine].sum())
+        own[ctx[mine]] = seg[mine]
+        key_base[b + 1] = key_base[b] + len(fits)
+        all_fits.extend(fits)
+        other = ~mine & (seg > 0)
+        shared.append((key_base[b] + seg[other] - 1, ctx[other]))
+        del seg, ctx, mine, other, no_normal
+    n_keys = int(key_base[-1])
+    has = own > 0
+    own_key = np.where(has, key_base[block_of] + own - 1, -1)
+    uf = UnionFind(n_keys)
+    pairs: dict[tuple[int, int], int] = {}
+    for ka, pts in shared:
+        kb = own_key[pts]
+        ok = kb >= 0
+        lo, hi = np.minimum(ka[ok], kb[ok]), np.maximum(ka[ok], kb[ok])
+        u, cnt = np.unique(lo * n_keys + hi, return_counts=True)
+        for c_, k_ in zip(u.tolist(), cnt.tolist(), strict=True):
+            pr = (c_ // n_keys, c_ % n_keys)
+            pairs[pr] = pairs.get(pr, 0) + k_
+    sel = [pr for pr, k_ in sorted(pairs.items())
+           if k_ >= 3 and _same_primitive(all_fits[pr[0]], all_fits[pr[1]], params)]
+    if sel:
+        arr = np.asarray(sel, dtype=np.int64)
+        uf.union_pairs(arr[:, 0], arr[:, 1])
+    # Tile segments 1..S: the roots that own points, in order of their lowest point; the
+    # fit of each is that of its member with the most owned points.
+    root = uf.find(np.arange(n_keys)) if n_keys else np.zeros(0, np.int64)
+    owned = np.bincount(own_key[has], minlength=n_keys)
+    first = np.full(n_keys, n, dtype=np.int64)
+    np.minimum.at(first, root[own_key[has]], np.flatnonzero(has))
+    live = np.flatnonzero(first < n)
+    live = live[np.argsort(first[live], kind="stable")]
+    seg_of_root = np.zeros(n_keys, dtype=np.int64)
+    seg_of_root[live] = np.arange(1, len(live) + 1)
+    segment = np.zeros(n, dtype=np.int64)
+    segment[has] = seg_of_root[root[own_key[has]]]
+    best = np.full(n_keys, -1, dtype=np.int64)
+    for k in np.argsort(owned, kind="stable").tolist():  # ascending: the largest wins last
+        if owned[k]:
+            best[root[k]] = k
+    fits = [all_fits[int(best[r])] for r in live.tolist()]
+    return segment, fits, n_invalid, n_blocks
+
+
 def coarse_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, int]:
     """Dask task: segment one tile; write its arrays and table, then its record."""
     store = RunStore.open(url, mode="a")
     params = CoarseParams.from_dict(cfg["params"])
     scale = np.asarray(store.attrs["coords"]["scale"])
     offset = np.asarray(store.attrs["coords"]["offset"])
+    margin = float(store.attrs["grid"]["buffer"])
     d = _tile_points(store, tile, scale)
     xyz, n = d["local"], len(d["local"])
-    labels = np.full(n, -1, dtype=np.int64)
-    fits: tuple[Any, ...] = ()
-    n_invalid = 0
-    if n:
-        nr = estimate_normals(xyz, k=params.k)
-        valid = nr.valid
-        n_invalid = int((~valid).sum())
-        rng = np.random.default_rng(np.random.SeedSequence([params.seed, tile]))
-        if valid.sum() >= params.ransac.min_support:
-            res = efficient_ransac(xyz[valid], nr.normals[valid], **params.ransac.to_dict(), rng=rng)
-            labels[valid] = res.labels
-            fits = res.primitives
-    free = len(fits)  # the group of points no primitive explains
-    groups = np.where(labels < 0, free if params.free_segments else -1, labels)
-    segment = dbscan_segments(xyz, groups, eps=cfg["eps"], min_samples=params.min_samples) if n else np.zeros(0, np.int64)
-    if params.free_segments and n:
-        in_free = (groups == free) & (segment > 0)
-        sizes = np.bincount(segment[in_free], minlength=int(segment.max(initial=0)) + 1)
-        segment[in_free & (sizes[segment] < params.free_min_points)] = 0
-    primitive = np.zeros(n, dtype=np.uint8)
+    segment, fits, n_invalid, n_blocks = _segment_tile(xyz, params, cfg["eps"], tile, margin)
     has = segment > 0
-    kinds = np.array([PRIMITIVE_CODES[f.kind] for f in fits] + [0], dtype=np.uint8)  # free: 0
-    primitive[has] = kinds[groups[has]]
+    kinds = np.array([0] + [PRIMITIVE_CODES.get(f["kind"], 0) for f in fits], dtype=np.uint8)  # free: 0
+    primitive = kinds[segment]
     store.write_unit(f"coarse/tiles/{tile}", {
         "primitive": primitive,
         "segment": segment.astype(np.int32),
@@ -172,19 +281,14 @@ def coarse_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, int]:
             if sid <= 0:
                 continue
             rows_idx = order[a:b]
-            g = int(groups[rows_idx[0]])
+            fit = fits[sid - 1]
             core = d["core"][rows_idx]
             world = xyz[rows_idx] + offset
             rows["tile"].append(tile)
             rows["segment"].append(sid)
-            if g == free:
-                rows["kind"].append("free")
-                rows["params"].append("[]")
-                rows["rms"].append(float("nan"))
-            else:
-                rows["kind"].append(fits[g].kind)
-                rows["params"].append(json.dumps(list(fits[g].params)))
-                rows["rms"].append(float(fits[g].rms))
+            rows["kind"].append(fit["kind"])
+            rows["params"].append(fit["params"])
+            rows["rms"].append(fit["rms"])
             rows["n_points"].append(int(len(rows_idx)))
             rows["n_core"].append(int(core.sum()))
             rows["min_index"].append(int(d["index"][rows_idx][core].min()) if core.any() else -1)
@@ -199,6 +303,7 @@ def coarse_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, int]:
         "n_segments": int(len(rows["segment"])),
         "n_unsegmented": int((segment == 0).sum()),
         "n_no_normal": n_invalid,
+        "n_blocks": n_blocks,
     }
     store.record(STAGE, str(tile), info)
     return info

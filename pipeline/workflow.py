@@ -110,6 +110,8 @@ class CoarseSection(_Section):
     free_segments: bool = Field(True, description="cluster the points no primitive explains into free segments too")
     free_min_points: PosInt = Field(200, description="smallest free segment, points")
     seed: int = Field(0, description="base seed; tile t uses [seed, t]")
+    block_points: Annotated[int, Field(ge=0)] = Field(
+        1_000_000, description="tiles with more points are segmented in blocks of at most this many; 0 = never")
 
 
 class TreeSection(_Section):

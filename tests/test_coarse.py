@@ -14,6 +14,7 @@ from pipeline.cli import main
 from pipeline.coarse import CoarseParams, run_coarse
 from pipeline.graph import task_runner
 from scenes.synth import synth
+from tiling.errors import ConfigError
 from tiling.ingest import IngestParams, ingest
 from tiling.store import RunStore
 
@@ -27,11 +28,11 @@ def scan(tmp_path_factory) -> Path:
     return out
 
 
-def _segment(scan_path: Path, store: Path, tile_size: float) -> np.ndarray:
+def _segment(scan_path: Path, store: Path, tile_size: float, params: CoarseParams = PARAMS) -> np.ndarray:
     """Global segment id per original point (core copies), after ingest + coarse."""
     with task_runner("sync", progress=False) as run:
         ingest([str(scan_path)], str(store), IngestParams(tile_size=tile_size, buffer=2.0), runner=run)
-        run_coarse(str(store), PARAMS, runner=run)
+        run_coarse(str(store), params, runner=run)
     s = RunStore.open(store)
     n = laspy.read(scan_path).header.point_count
     labels = np.full(n, -1, dtype=np.int64)
@@ -62,6 +63,29 @@ def test_tile_size_does_not_change_the_answer(scan, untiled, tmp_path, tile_size
         tiled_share = np.bincount(tiled[sel]).max() / sel.sum()
         untiled_share = np.bincount(untiled[sel]).max() / sel.sum()
         assert tiled_share >= untiled_share - 0.05, inst
+
+
+@pytest.mark.parametrize("block_points", [8_000, 20_000])
+def test_blocks_inside_a_tile_do_not_change_the_answer(scan, untiled, tmp_path, block_points):
+    """A tile above ``block_points`` is segmented block by block and joined like tiles."""
+    blocked = _segment(scan, tmp_path / "s", 500.0, CoarseParams(eps=0.3, block_points=block_points))
+    recs = RunStore.open(tmp_path / "s").records("coarse")
+    assert all(r["n_blocks"] >= -(-r["n_points"] // block_points) for r in recs.values())
+    assert max(r["n_blocks"] for r in recs.values()) >= 2  # tiles were split
+    assert adjusted_rand_score(untiled, blocked) >= 0.95
+    gt = np.asarray(laspy.read(scan).gt_instance)
+    for inst in np.unique(gt):
+        sel = gt == inst
+        if sel.sum() < 500:
+            continue
+        blocked_share = np.bincount(blocked[sel]).max() / sel.sum()
+        untiled_share = np.bincount(untiled[sel]).max() / sel.sum()
+        assert blocked_share >= untiled_share - 0.05, inst
+
+
+def test_block_points_is_validated():
+    with pytest.raises(ConfigError, match="block_points"):
+        CoarseParams(block_points=-1)
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,107 @@
+"""Blocks of bounded size inside a tile: a k-d split of the x-y plane by point count.
+
+Tiles are laid out on a regular grid sized for the scan's *average* density; near a
+scanner station a tile can hold several times that many points. The coarse stage splits
+such a tile into blocks of at most ``max_points`` points, segments each block with a
+margin of context around it, and joins the blocks' segments over the context points as
+the stage joins tiles (``pipeline/coarse.py``). Memory per task then follows the block,
+not the densest spot of the scan.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from tiling.errors import ConfigError
+
+__all__ = ["split_blocks", "block_context"]
+
+
+def split_blocks(xy: npt.ArrayLike, max_points: int) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
+    """Split points into x-y rectangles of at most ``max_points`` points each.
+
+    Each rectangle holding more points is cut at the median of its longer side (the
+    lower half keeps the points strictly below the median value, so equal coordinates
+    stay together), recursively.
+
+    Parameters
+    ----------
+    xy : array-like of shape (n_points, 2) (further columns are ignored)
+    max_points : int
+        Largest block wanted, ``>= 1``. A block of identical x-y values cannot be cut and
+        may stay larger.
+
+    Returns
+    -------
+    block_of : ndarray of shape (n_points,), int64
+        The block of every point, ``0 .. n_blocks-1``.
+    rects : ndarray of shape (n_blocks, 4)
+        ``[xmin, ymin, xmax, ymax]`` of each block's points.
+
+    Examples
+    --------
+    >>> xy = np.array([[0, 0], [1, 0], [2, 0], [3, 0], [3, 1.0]])
+    >>> block_of, rects = split_blocks(xy, 2)
+    >>> block_of.tolist()
+    [0, 0, 1, 2, 2]
+    >>> rects.tolist()
+    [[0.0, 0.0, 1.0, 0.0], [2.0, 0.0, 2.0, 0.0], [3.0, 0.0, 3.0, 1.0]]
+    """
+    a = np.asarray(xy, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] < 2:
+        raise ConfigError(f"The 'xy' parameter of split_blocks must have shape (n_points, 2). Got {a.shape} instead.")
+    if isinstance(max_points, bool) or not isinstance(max_points, (int, np.integer)) or max_points < 1:
+        raise ConfigError(f"The 'max_points' parameter of split_blocks must be an int >= 1. Got {max_points!r} instead.")
+    x, y = np.ascontiguousarray(a[:, 0]), np.ascontiguousarray(a[:, 1])
+    block_of = np.zeros(len(a), dtype=np.int64)
+    rects: list[list[float]] = []
+    stack = [np.arange(len(a), dtype=np.int64)]
+    done: list[np.ndarray] = []
+    while stack:
+        idx = stack.pop()
+        if len(idx) <= max_points:
+            done.append(idx)
+            continue
+        bx, by = x[idx], y[idx]
+        c = bx if np.ptp(bx) >= np.ptp(by) else by
+        med = float(np.median(c))
+        low = c < med
+        if not low.any():  # half or more of the points sit on the minimum: cut above it
+            low = c <= med
+        if low.all():  # all equal along this axis: try the other one
+            c = by if c is bx else bx
+            med = float(np.median(c))
+            low = c < med
+            if not low.any():
+                low = c <= med
+            if low.all():  # identical x-y: cannot be cut
+                done.append(idx)
+                continue
+        stack.append(idx[~low])
+        stack.append(idx[low])
+    # Blocks in order of their lowest point index: the same input gives the same blocks.
+    done.sort(key=lambda i: int(i[0]) if len(i) else -1)
+    for b, idx in enumerate(done):
+        block_of[idx] = b
+        if len(idx):
+            rects.append([float(x[idx].min()), float(y[idx].min()), float(x[idx].max()), float(y[idx].max())])
+        else:
+            rects.append([np.nan] * 4)
+    return block_of, np.asarray(rects, dtype=np.float64).reshape(-1, 4)
+
+
+def block_context(xy: npt.ArrayLike, rect: npt.ArrayLike, margin: float) -> npt.NDArray[np.int64]:
+    """Indices of the points within ``margin`` of a block's rectangle (its own included).
+
+    Examples
+    --------
+    >>> xy = np.array([[0, 0], [1, 0], [2, 0], [3, 0.0]])
+    >>> block_context(xy, [0, 0, 1, 0], 1.0).tolist()
+    [0, 1, 2]
+    """
+    a = np.asarray(xy, dtype=np.float64)
+    r = np.asarray(rect, dtype=np.float64)
+    inside = (a[:, 0] >= r[0] - margin) & (a[:, 0] <= r[2] + margin)
+    inside &= (a[:, 1] >= r[1] - margin) & (a[:, 1] <= r[3] + margin)
+    return np.flatnonzero(inside)
