@@ -83,9 +83,13 @@ class CoarseParams:
         ``radius_tol`` (relative).
     block_points : int
         A tile with more points is segmented in x-y blocks of at most this many points
-        (each with the tile's buffer width of context around it), joined like tiles, so
-        that a task's memory follows this bound and not the densest spot of the scan
-        (a tile near a scanner station can hold several times the average). 0 = never.
+        (each with a margin of context around it), joined like tiles, so that a task's
+        memory follows this bound and not the densest spot of the scan (a tile near a
+        scanner station can hold several times the average). 0 = never.
+    block_margin : float or None
+        Context around a block, metres; None = min(the tile buffer, 4 x the DBSCAN eps).
+        Dense blocks are small (a 1 M-point block near a station can be 3 x 4 m), so a
+        margin as wide as the tile buffer would multiply the points each block processes.
     """
 
     k: int = 16
@@ -100,8 +104,12 @@ class CoarseParams:
     distance_tol: float = 0.15
     radius_tol: float = 0.15
     block_points: int = 1_000_000
+    block_margin: float | None = None
 
     def __post_init__(self) -> None:
+        if self.block_margin is not None and not (math.isfinite(self.block_margin) and self.block_margin > 0):
+            raise ConfigError(f"The 'block_margin' parameter of coarse must be a float in the range (0.0, inf) "
+                              f"or None. Got {self.block_margin!r} instead.")
         if isinstance(self.block_points, bool) or not isinstance(self.block_points, int) or self.block_points < 0:
             raise ConfigError(f"The 'block_points' parameter of coarse must be an int in the range [0, inf). "
                               f"Got {self.block_points!r} instead.")
@@ -123,6 +131,7 @@ class CoarseParams:
     def from_dict(cls, data: dict[str, Any]) -> CoarseParams:
         d = dict(data)
         d.setdefault("block_points", 0)  # stores written before blocks existed: tiles whole
+        d.setdefault("block_margin", None)
         d["ransac"] = RansacParams.from_dict(d["ransac"])
         return cls(**d)
 
@@ -181,8 +190,7 @@ def _segment_tile(xyz: np.ndarray, params: CoarseParams, eps: float, tile: int, 
 
     A dense tile (near a scanner station it can hold several times the average) is cut
     into x-y blocks of at most ``block_points`` points (:func:`primitives.blocks.split_blocks`).
-    Each block is segmented with the points within ``margin`` (the tile's buffer width)
-    around it as context, and the blocks' segments are joined over the context points
+    Each block is segmented with the points within ``margin`` around it as context, and the blocks' segments are joined over the context points
     exactly as tiles are joined over their buffers (at least 3 shared points and the same
     primitive within the tolerances). Returns segment per point, fits per segment, points
     without a normal and the number of blocks.
@@ -256,7 +264,8 @@ def coarse_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, int]:
     params = CoarseParams.from_dict(cfg["params"])
     scale = np.asarray(store.attrs["coords"]["scale"])
     offset = np.asarray(store.attrs["coords"]["offset"])
-    margin = float(store.attrs["grid"]["buffer"])
+    margin = (min(float(store.attrs["grid"]["buffer"]), 4.0 * float(cfg["eps"]))
+              if params.block_margin is None else float(params.block_margin))
     d = _tile_points(store, tile, scale)
     xyz, n = d["local"], len(d["local"])
     segment, fits, n_invalid, n_blocks = _segment_tile(xyz, params, cfg["eps"], tile, margin)
