@@ -611,8 +611,11 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     if eps is None or cluster_epsilon is None:
         scale = np.asarray(attrs["coords"]["scale"])
         biggest = max(tiles, key=lambda t: int(done_ingest[str(t)].get("n_points", 0)))
-        xyz = _tile_points(store, biggest, scale)["local"]
-        sample = xyz[np.random.default_rng(params.seed).permutation(len(xyz))[:200_000]]
+        # Only the sample is converted (the largest tile can hold 15 M points near a
+        # station): the same rows, the same values as converting the tile first.
+        raw = store.read_unit(f"tiles/{biggest}", ["xyz"])["xyz"]
+        sample = raw[np.random.default_rng(params.seed).permutation(len(raw))[:200_000]].astype(np.float64) * scale
+        del raw
         spacing_x3 = default_eps(sample) if len(sample) > 10 else 0.3
         eps = spacing_x3 if eps is None else eps
         if cluster_epsilon is None:
