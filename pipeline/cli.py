@@ -154,9 +154,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="leave points that no primitive explains unsegmented (default: DBSCAN them too)")
     c.add_argument("--free-min-points", type=_positive_int, default=200,
                    help="smallest free segment, points (default 200)")
-    c.add_argument("--block-points", type=_nonnegative_int, default=1_000_000,
+    c.add_argument("--block-points", type=_nonnegative_int, default=0,
                    help="segment tiles with more points in x-y blocks of at most this many, "
-                        "joined like tiles (default 1000000; 0 = never)")
+                        "joined like tiles (default 0 = never)")
     c.add_argument("--seed", type=int, default=0)
     c.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process")
     c.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
