@@ -53,16 +53,20 @@ def untiled(scan, tmp_path_factory) -> np.ndarray:
 def test_tile_size_does_not_change_the_answer(scan, untiled, tmp_path, tile_size):
     tiled = _segment(scan, tmp_path / "s", tile_size)
     assert adjusted_rand_score(untiled, tiled) >= 0.95
-    # no ground-truth element is split at a tile border: each element's dominant segment
-    # covers as much of it as without tiles
+    # no ground-truth element is split at a tile border
+    _assert_elements_kept(scan, tiled, untiled)
+
+
+def _assert_elements_kept(scan: Path, labels: np.ndarray, reference: np.ndarray) -> None:
+    """Each ground-truth element's dominant segment covers as much of it as in ``reference``."""
     gt = np.asarray(laspy.read(scan).gt_instance)
     for inst in np.unique(gt):
         sel = gt == inst
         if sel.sum() < 500:
             continue
-        tiled_share = np.bincount(tiled[sel]).max() / sel.sum()
-        untiled_share = np.bincount(untiled[sel]).max() / sel.sum()
-        assert tiled_share >= untiled_share - 0.05, inst
+        share = np.bincount(labels[sel]).max() / sel.sum()
+        reference_share = np.bincount(reference[sel]).max() / sel.sum()
+        assert share >= reference_share - 0.05, inst
 
 
 @pytest.mark.parametrize("block_points", [8_000, 20_000])
@@ -73,14 +77,7 @@ def test_blocks_inside_a_tile_do_not_change_the_answer(scan, untiled, tmp_path, 
     assert all(r["n_blocks"] >= -(-r["n_points"] // block_points) for r in recs.values())
     assert max(r["n_blocks"] for r in recs.values()) >= 2  # tiles were split
     assert adjusted_rand_score(untiled, blocked) >= 0.95
-    gt = np.asarray(laspy.read(scan).gt_instance)
-    for inst in np.unique(gt):
-        sel = gt == inst
-        if sel.sum() < 500:
-            continue
-        blocked_share = np.bincount(blocked[sel]).max() / sel.sum()
-        untiled_share = np.bincount(untiled[sel]).max() / sel.sum()
-        assert blocked_share >= untiled_share - 0.05, inst
+    _assert_elements_kept(scan, blocked, untiled)
 
 
 def test_block_points_is_validated():
