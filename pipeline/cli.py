@@ -157,6 +157,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--block-points", type=_nonnegative_int, default=0,
                    help="segment tiles with more points in x-y blocks of at most this many, "
                         "joined like tiles (default 0 = never)")
+    c.add_argument("--group-gap", type=_non_negative, default=0.6,
+                   help="join touching segments (not large planes) within this many metres into element "
+                        "groups for the tree (default 0.6; 0 = off)")
     c.add_argument("--seed", type=int, default=0)
     c.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process")
     c.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
@@ -391,7 +394,7 @@ def _cmd_coarse(args: argparse.Namespace) -> int:
         ransac=RansacParams(epsilon=args.epsilon, alpha_deg=args.alpha, min_support=args.min_support),
         cluster_epsilon=args.cluster_epsilon, eps=args.eps, min_samples=args.min_samples, seed=args.seed,
         free_segments=not args.no_free_segments, free_min_points=args.free_min_points,
-        block_points=args.block_points,
+        block_points=args.block_points, group_gap=args.group_gap,
     )
     with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
         report = run_coarse(args.store, params, runner=run)

@@ -33,6 +33,7 @@ import pyarrow.parquet as pq
 
 from primitives.blocks import block_context, split_blocks
 from primitives.dbscan import dbscan_segments, default_eps
+from primitives.group import segment_contacts
 from primitives.normals import estimate_normals
 from primitives.ransac import RansacParams, efficient_ransac
 from primitives.stitch import UnionFind
@@ -92,6 +93,16 @@ class CoarseParams:
         Context around a block, metres; None = min(the tile buffer, 4 x the DBSCAN eps).
         Dense blocks are small (a 1 M-point block near a station can be 3 x 4 m), so a
         margin as wide as the tile buffer would multiply the points each block processes.
+    group_gap : float
+        Element groups (docs/method.md): global segments whose points come within this
+        many metres of each other (:func:`primitives.group.segment_contacts`) and that
+        are not large planes are one element group, the unit the tree splits and
+        HollowNet classifies; 0 = every segment is its own group (the paper's reading).
+    group_min_contacts : int
+        Contacts (voxel representatives within ``group_gap``) two segments need.
+    group_max_plane : float
+        A plane whose horizontal extent (bounding-box diagonal in x-y) exceeds this many
+        metres (ground, roofs, facades) is never grouped: elements stand on it or in it.
     """
 
     k: int = 16
@@ -107,8 +118,22 @@ class CoarseParams:
     radius_tol: float = 0.15
     block_points: int = 0
     block_margin: float | None = None
+    group_gap: float = 0.6
+    group_min_contacts: int = 3
+    group_max_plane: float = 8.0
 
     def __post_init__(self) -> None:
+        if not (isinstance(self.group_gap, (int, float)) and math.isfinite(self.group_gap) and self.group_gap >= 0):
+            raise ConfigError(f"The 'group_gap' parameter of coarse must be a float in the range [0.0, inf). "
+                              f"Got {self.group_gap!r} instead.")
+        if isinstance(self.group_min_contacts, bool) or not isinstance(self.group_min_contacts, int) \
+                or self.group_min_contacts < 1:
+            raise ConfigError(f"The 'group_min_contacts' parameter of coarse must be an int in the range [1, inf). "
+                              f"Got {self.group_min_contacts!r} instead.")
+        if not (isinstance(self.group_max_plane, (int, float)) and math.isfinite(self.group_max_plane)
+                and self.group_max_plane > 0):
+            raise ConfigError(f"The 'group_max_plane' parameter of coarse must be a float in the range (0.0, inf). "
+                              f"Got {self.group_max_plane!r} instead.")
         if self.block_margin is not None and not (math.isfinite(self.block_margin) and self.block_margin > 0):
             raise ConfigError(f"The 'block_margin' parameter of coarse must be a float in the range (0.0, inf) "
                               f"or None. Got {self.block_margin!r} instead.")
@@ -134,6 +159,7 @@ class CoarseParams:
         d = dict(data)
         d.setdefault("block_points", 0)  # stores written before blocks existed: tiles whole
         d.setdefault("block_margin", None)
+        d.setdefault("group_gap", 0.0)  # stores written before element groups: one group per segment
         d["ransac"] = RansacParams.from_dict(d["ransac"])
         return cls(**d)
 
@@ -308,6 +334,11 @@ def coarse_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, int]:
             for j, key in enumerate(("xmax", "ymax", "zmax")):
                 rows[key].append(float(world[:, j].max()))
     _write_table(store, f"coarse/tables/{tile}.parquet", pa.table(rows, schema=_TABLE_SCHEMA))
+    n_contacts = 0
+    if params.group_gap > 0:
+        ca, cb, cn = segment_contacts(xyz, segment, params.group_gap, min_contacts=params.group_min_contacts)
+        _write_table(store, f"coarse/contacts/{tile}.parquet", pa.table({"a": ca, "b": cb, "n": cn}))
+        n_contacts = len(ca)
     info = {
         "params_hash": cfg["params_hash"],
         "n_points": n,
@@ -315,6 +346,7 @@ def coarse_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, int]:
         "n_unsegmented": int((segment == 0).sum()),
         "n_no_normal": n_invalid,
         "n_blocks": n_blocks,
+        "n_contacts": n_contacts,
     }
     store.record(STAGE, str(tile), info)
     return info
@@ -427,6 +459,51 @@ def _pread_all(fd: int, size: int, at: int) -> np.ndarray:
     return out
 
 
+def _element_groups(store: RunStore, tiles: Sequence[int], keys: list[tuple[int, int]],
+                    key_rows: dict[int, list[tuple[int, int]]], info: dict[tuple[int, int], dict[str, Any]],
+                    roots: np.ndarray, params: CoarseParams) -> np.ndarray:
+    """Group root (a key row) of every key row: stitched segments joined over the tiles'
+    contacts (``coarse/contacts/<tile>.parquet``) unless one of the two is a large plane."""
+    n = len(keys)
+    # Per stitched segment (root): the primitive of its largest member and its x-y extent.
+    big_n: dict[int, int] = {}
+    kind: dict[int, str] = {}
+    box: dict[int, list[float]] = {}
+    for i, r in enumerate(roots.tolist()):
+        row = info[keys[i]]
+        if row["n_points"] > big_n.get(r, -1):
+            big_n[r], kind[r] = row["n_points"], row["kind"]
+        b = box.setdefault(r, [np.inf, np.inf, -np.inf, -np.inf])
+        b[0], b[1] = min(b[0], row["xmin"]), min(b[1], row["ymin"])
+        b[2], b[3] = max(b[2], row["xmax"]), max(b[3], row["ymax"])
+    large = np.zeros(n, dtype=bool)
+    for r, b in box.items():
+        large[r] = kind[r] == "plane" and math.hypot(b[2] - b[0], b[3] - b[1]) > params.group_max_plane
+    uf = UnionFind(n)
+    uf.union_pairs(np.arange(n, dtype=np.int64), roots.astype(np.int64))
+    for t in tiles:
+        rel = f"coarse/contacts/{t}.parquet"
+        try:
+            c = _read_table(store, rel)
+        except FileNotFoundError:
+            raise PipelineError(f"store {store.url}: tile {t} has no {rel}; rerun `hollowtree coarse`") from None
+        a = np.asarray(c.column("a").to_numpy(), dtype=np.int64)
+        b = np.asarray(c.column("b").to_numpy(), dtype=np.int64)
+        if not len(a):
+            continue
+        rows = key_rows.get(t, [])
+        lut = np.full(max([int(max(a.max(), b.max()))] + [s_ for s_, _ in rows]) + 1, -1, dtype=np.int64)
+        for s_, i in rows:
+            lut[s_] = i
+        ka, kb = lut[a], lut[b]
+        ok = (ka >= 0) & (kb >= 0)
+        ra, rb = roots[ka[ok]], roots[kb[ok]]
+        join = ~large[ra] & ~large[rb]
+        if join.any():
+            uf.union_pairs(ra[join], rb[join])
+    return uf.find(np.arange(n))
+
+
 def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tuple[int, int]:
     """Join tile segments over shared buffer points; write global ids, table and CSR."""
     grid = TileGrid.from_dict(store.attrs["grid"])
@@ -514,10 +591,24 @@ def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tupl
     for r, m, c in zip(roots.tolist(), min_index.tolist(), n_core.tolist(), strict=True):
         root_min[r] = min(root_min.get(r, m), m)
         root_core[r] = root_core.get(r, 0) + c
-    live = sorted((m, r) for r, m in root_min.items() if root_core[r] > 0)
-    gid_of_root = {r: g + 1 for g, (_, r) in enumerate(live)}
+    # Element groups: the members of one group get consecutive global ids, so that a
+    # group is one run of the CSR (the tree stage's unit). Without grouping every
+    # segment is its own group and the order is that of each segment's lowest index.
+    group_root = (_element_groups(store, tiles, keys, key_rows, info, roots, params)
+                  if params.group_gap > 0 and keys else roots)
+    group_min: dict[int, int] = {}
+    for r, m in root_min.items():
+        if root_core[r] > 0:
+            gr = int(group_root[r])
+            group_min[gr] = min(group_min.get(gr, m), m)
+    live = sorted((group_min[int(group_root[r])], m, r) for r, m in root_min.items() if root_core[r] > 0)
+    gid_of_root = {r: g + 1 for g, (_, _, r) in enumerate(live)}
     key_global = np.array([gid_of_root.get(r, 0) for r in roots.tolist()], dtype=np.int64)
     n_segments = len(live)
+    group_of_segment = np.zeros(n_segments + 1, dtype=np.int64)
+    if live:
+        gm = np.array([gmin for gmin, _, _ in live], dtype=np.int64)
+        group_of_segment[1:] = np.cumsum(np.r_[True, gm[1:] != gm[:-1]])
 
     # Per tile: the global id of every core row; counts per global segment for the CSR.
     def tile_global(t: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
@@ -578,11 +669,13 @@ def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tupl
         if g:
             members.setdefault(g, []).append(info[k])
     out: dict[str, list[Any]] = {c: [] for c in (
-        "segment", "kind", "params", "rms", "n_points", "n_tiles", "xmin", "ymin", "zmin", "xmax", "ymax", "zmax")}
+        "segment", "group", "kind", "params", "rms", "n_points", "n_tiles",
+        "xmin", "ymin", "zmin", "xmax", "ymax", "zmax")}
     for g in range(1, n_segments + 1):
         ms = members[g]
         big = max(ms, key=lambda r: r["n_points"])
         out["segment"].append(g)
+        out["group"].append(int(group_of_segment[g]))
         out["kind"].append(big["kind"])
         out["params"].append(big["params"])
         out["rms"].append(big["rms"])

@@ -158,7 +158,7 @@ def _classify_groups(store: RunStore, group_of: np.ndarray, n_groups: int, clf: 
         if batch:
             cls = np.asarray(clf.predict(batch).class_id, dtype=np.uint8)
             if ground is not None and roof_min_height is not None:
-                for j, gid in enumerate(ids):
+                for j in range(len(ids)):
                     z = batch_z[j]
                     if len(z):
                         cls[j] = ground_or_roof(cls[j:j + 1], np.array([np.median(z)]), np.zeros(1, np.int64),

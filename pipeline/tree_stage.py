@@ -1,9 +1,11 @@
-"""The tree stage: the hierarchical tree with HollowNet for every global coarse segment.
+"""The tree stage: the hierarchical tree with HollowNet for every element group.
 
 Orchestration only (the recursion is ``tree/build.py``, the classifier
-``hollownet/predict.py``). Segments are taken in CSR order and cut into batches of about
-``batch_points`` points: small segments share a batch, a large one is a batch of its own
-and is never split (segment sizes vary by 1000x). One Dask task per batch reads its
+``hollownet/predict.py``). An element group is a run of consecutive global coarse
+segments that touch (``coarse.group_gap``, docs/method.md); with grouping off it is one
+segment. Groups are taken in CSR order and cut into batches of about ``batch_points``
+points: small groups share a batch, a large one is a batch of its own and is never split
+(sizes vary by 1000x). One Dask task per batch reads its
 segments' points with one read of ``coarse/csr/xyz``, builds each tree, and writes, after
 its data, its completion record. HollowNet is loaded once per worker process.
 
@@ -15,7 +17,8 @@ Store layout written here (``docs/store.md``)::
                                             instances of the tree, and one instance per planar
                                             class (ground, wall, roof) and coarse segment
     tree/batches/<b>/score     float32(n,)  the classifier's score of the leaf
-    tree/tables/<b>.parquet                 the batch's tree nodes
+    tree/tables/<b>.parquet                 the batch's tree nodes (``segment``: the first
+                                            global segment of the node's group)
     tree/nodes.parquet                      every node of every segment, instances numbered globally
 """
 
@@ -35,7 +38,7 @@ from tiling.classes import PLANAR_CLASSES
 from tiling.errors import ConfigError, PipelineError
 from tiling.store import RunStore
 
-__all__ = ["TreeStageParams", "tree_batch", "run_tree", "TreeReport", "plan_batches"]
+__all__ = ["TreeStageParams", "tree_batch", "run_tree", "TreeReport", "plan_batches", "group_starts"]
 
 STAGE = "tree"
 #: Version of the tree's algorithm (tree/): part of the stage's parameters hash and of the
@@ -125,12 +128,28 @@ _NODE_COLUMNS = ("segment", "node_id", "parent", "depth", "sequence", "e1", "e2"
                  "is_leaf", "instance")
 
 
+def group_starts(store: RunStore) -> np.ndarray:
+    """0-based row of the first segment of every element group, and the segment count
+    last (``coarse/segments.parquet``'s ``group`` column; one group per segment in a
+    store made before element groups)."""
+    t = _read_table(store, "coarse/segments.parquet")
+    n = t.num_rows
+    if "group" not in t.column_names or n == 0:
+        return np.arange(n + 1, dtype=np.int64)
+    seg = np.asarray(t.column("segment").to_numpy(), dtype=np.int64)
+    grp = np.asarray(t.column("group").to_numpy(), dtype=np.int64)[np.argsort(seg, kind="stable")]
+    return np.r_[np.flatnonzero(np.r_[True, grp[1:] != grp[:-1]]), n].astype(np.int64)
+
+
 def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
-               ground: np.ndarray | None = None) -> dict[str, Any]:
+               ground: np.ndarray | None = None, starts: list[int] | None = None) -> dict[str, Any]:
     """Dask task: the trees of global segments ``segs[0] + 1 .. segs[1]`` (one batch).
 
+    ``starts``: the 0-based first segment of every element group in the batch (one tree
+    per group, built on the points of all its segments); None = one tree per segment.
     ``ground``: the local ground level of each of these segments, in the store's
-    coordinates (``tree.ground.ground_levels``); used when ``roof_min_height`` is set.
+    coordinates (``tree.ground.ground_levels``); used when ``roof_min_height`` is set
+    (a group takes its segments' lowest).
     """
     from hollownet.predict import Classifier
     from tree.build import build_tree
@@ -150,15 +169,16 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
     clf = Classifier.get(params.weights, num_threads=_worker_threads())
     cols: dict[str, list[Any]] = {c: [] for c in _NODE_COLUMNS}
     n_inst = 0
-    for s in range(segs[0], segs[1]):
-        a, z = int(offsets[s]) - lo, int(offsets[s + 1]) - lo
+    bounds = list(range(segs[0], segs[1] + 1)) if starts is None else [*starts, segs[1]]
+    for s, s_end in zip(bounds[:-1], bounds[1:], strict=True):
+        a, z = int(offsets[s]) - lo, int(offsets[s_end]) - lo
         pts = xyz[a:z]
         res = build_tree(pts - pts.mean(axis=0), clf, max_depth=params.max_depth, threshold=params.threshold,
                          rng=np.random.SeedSequence([params.seed, s + 1]))
         leaf[a:z] = res.leaf
         if params.roof_min_height is not None and ground is not None:
-            res_class = ground_or_roof(res.class_id, pts[:, 2], res.leaf, float(ground[s - segs[0]]),
-                                       params.roof_min_height)
+            res_class = ground_or_roof(res.class_id, pts[:, 2], res.leaf,
+                                       float(np.min(ground[s - segs[0]:s_end - segs[0]])), params.roof_min_height)
         else:
             res_class = res.class_id
         cls[a:z] = res_class
@@ -194,6 +214,7 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
 @dataclass(frozen=True, kw_only=True)
 class TreeReport:
     n_segments: int
+    n_groups: int
     n_batches: int
     batches_run: int
     n_nodes: int
@@ -201,7 +222,7 @@ class TreeReport:
     seconds: float
 
     def summary(self) -> str:
-        return (f"tree: {self.n_segments:,} segments in {self.n_batches} batches ({self.batches_run} run, "
+        return (f"tree: {self.n_segments:,} segments in {self.n_groups:,} element groups, {self.n_batches} batches ({self.batches_run} run, "
                 f"{self.n_batches - self.batches_run} skipped); {self.n_nodes:,} nodes, "
                 f"{self.n_instances:,} element instances; {self.seconds:.1f} s")
 
@@ -235,12 +256,19 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any) -> TreeReport:
     if stages.get(STAGE, {}).get("params_hash") not in (None, h):
         store.clear_records(STAGE)
     offsets = store.read_unit("coarse/csr", ["offsets"])["offsets"]
-    batches = plan_batches(offsets, params.batch_points)
+    # Batches of whole element groups (a group is a run of consecutive segments).
+    starts = group_starts(store)
+    batches = [(int(starts[g0]), int(starts[g1])) for g0, g1 in plan_batches(offsets[starts], params.batch_points)]
     done = {k: v for k, v in store.records(STAGE).items() if v.get("params_hash") == h}
     todo = [b for b in range(len(batches)) if str(b) not in done]
     ground = _ground_levels(store) if todo and params.roof_min_height is not None else None
-    results = runner(tree_batch, [(url, b, batches[b], cfg, None if ground is None else ground[slice(*batches[b])])
-                                  for b in todo], "tree: batches")
+
+    def starts_in(b: int) -> list[int]:
+        lo, hi = batches[b]
+        return starts[(starts >= lo) & (starts < hi)].tolist()
+
+    results = runner(tree_batch, [(url, b, batches[b], cfg, None if ground is None else ground[slice(*batches[b])],
+                                   starts_in(b)) for b in todo], "tree: batches")
     for b, info in zip(todo, results, strict=True):
         done[str(b)] = info
     infos = [done[str(b)] for b in range(len(batches))]
@@ -259,5 +287,5 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any) -> TreeReport:
     store.update_attrs({"stages": {**store.attrs.get("stages", {}), STAGE: {
         "params_hash": h, "units": len(batches), "done": len(batches), "params": params.to_dict(),
         "batches": [i["csr"] for i in infos], "instance_offsets": inst_offsets[:-1].tolist()}}})
-    return TreeReport(n_segments=len(offsets) - 1, n_batches=len(batches), batches_run=len(todo),
+    return TreeReport(n_segments=len(offsets) - 1, n_groups=len(starts) - 1, n_batches=len(batches), batches_run=len(todo),
                       n_nodes=n_nodes, n_instances=int(inst_offsets[-1]), seconds=time.perf_counter() - t0)

@@ -114,6 +114,12 @@ class CoarseSection(_Section):
         0, description="tiles with more points are segmented in blocks of at most this many; 0 = never (default)")
     block_margin: PosFloat | None = Field(
         None, description="context around a block, metres; null = min(ingest buffer, 4 x eps)")
+    group_gap: Annotated[float, Field(ge=0)] = Field(
+        0.6, description="segments (not large planes) whose points come this close, metres, are one element "
+                         "group for the tree; 0 = every segment alone")
+    group_min_contacts: PosInt = Field(3, description="contacts two segments need to be grouped")
+    group_max_plane: PosFloat = Field(
+        8.0, description="planes wider than this in x-y, metres (ground, roofs, facades), are never grouped")
 
 
 class TreeSection(_Section):

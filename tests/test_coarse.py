@@ -13,6 +13,7 @@ from sklearn.metrics import adjusted_rand_score
 from pipeline.cli import main
 from pipeline.coarse import CoarseParams, run_coarse
 from pipeline.graph import task_runner
+from pipeline.tree_stage import group_starts
 from scenes.synth import synth
 from tiling.errors import ConfigError
 from tiling.ingest import IngestParams, ingest
@@ -130,3 +131,44 @@ def test_tiny_tile_does_not_crash(tmp_path):
 def test_store_without_ingest_is_refused(tmp_path, capsys):
     assert main(["coarse", str(tmp_path / "nothing"), "--scheduler", "sync"]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def _groups(store, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Element group per point and the group column (by segment) of the global table."""
+    table = pq.read_table(store / "coarse" / "segments.parquet")
+    seg = np.asarray(table.column("segment").to_numpy())
+    grp = np.asarray(table.column("group").to_numpy())[np.argsort(seg)]
+    return np.r_[0, grp][labels], grp
+
+
+def test_groups_are_runs_of_segments_and_do_not_depend_on_tiles(scan, tmp_path):
+    params = CoarseParams(eps=0.3, group_gap=0.5)
+    untiled = _segment(scan, tmp_path / "u", 500.0, params)
+    g_untiled, col = _groups(tmp_path / "u", untiled)
+    # ids 1..K, each group one run of consecutive global segments, in order
+    assert col[0] == 1
+    assert set(np.diff(col).tolist()) <= {0, 1}
+    assert 1 < col.max() < len(col)  # some segments were grouped, not all into one
+    starts = group_starts(RunStore.open(tmp_path / "u"))
+    assert starts.tolist() == np.r_[np.flatnonzero(np.r_[True, col[1:] != col[:-1]]), len(col)].tolist()
+    # a group is a union of segments: the segments themselves are unchanged by grouping
+    plain = _segment(scan, tmp_path / "p", 500.0, CoarseParams(eps=0.3, group_gap=0.0))
+    assert adjusted_rand_score(plain, untiled) == 1.0
+    _, col0 = _groups(tmp_path / "p", plain)
+    assert col0.tolist() == list(range(1, len(col0) + 1))  # grouping off: one group per segment
+    for tile_size in (10.0, 20.0):
+        tiled = _segment(scan, tmp_path / f"t{tile_size:g}", tile_size, params)
+        g_tiled, _ = _groups(tmp_path / f"t{tile_size:g}", tiled)
+        assert adjusted_rand_score(g_untiled, g_tiled) >= 0.95
+
+
+def test_large_planes_are_never_grouped(scan, tmp_path):
+    labels = _segment(scan, tmp_path / "s", 500.0, CoarseParams(eps=0.3, group_gap=0.5, group_max_plane=4.0))
+    table = pq.read_table(tmp_path / "s" / "coarse" / "segments.parquet").to_pydict()
+    grp = np.asarray(table["group"])
+    sizes = np.bincount(grp)
+    wide = [i for i, k in enumerate(table["kind"]) if k == "plane"
+            and np.hypot(table["xmax"][i] - table["xmin"][i], table["ymax"][i] - table["ymin"][i]) > 4.0]
+    assert wide  # the minaret scene's ground is one
+    assert all(sizes[grp[i]] == 1 for i in wide)
+    assert (labels > 0).any()
