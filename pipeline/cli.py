@@ -157,6 +157,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--block-points", type=_nonnegative_int, default=0,
                    help="segment tiles with more points in x-y blocks of at most this many, "
                         "joined like tiles (default 0 = never)")
+    c.add_argument("--sparse-factor", type=_non_negative, default=4.0,
+                   help="segment the unsegmented points at least this many times sparser than the scan once "
+                        "more, every distance x (2 x this) (default 4; 0 = one pass)")
     c.add_argument("--group-gap", type=_non_negative, default=0.6,
                    help="join touching segments (not large planes) within this many metres into element "
                         "groups for the tree (default 0.6; 0 = off)")
@@ -394,7 +397,7 @@ def _cmd_coarse(args: argparse.Namespace) -> int:
         ransac=RansacParams(epsilon=args.epsilon, alpha_deg=args.alpha, min_support=args.min_support),
         cluster_epsilon=args.cluster_epsilon, eps=args.eps, min_samples=args.min_samples, seed=args.seed,
         free_segments=not args.no_free_segments, free_min_points=args.free_min_points,
-        block_points=args.block_points, group_gap=args.group_gap,
+        block_points=args.block_points, sparse_factor=args.sparse_factor, group_gap=args.group_gap,
     )
     with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
         report = run_coarse(args.store, params, runner=run)

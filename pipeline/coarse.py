@@ -24,7 +24,7 @@ import os
 import tempfile
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -32,7 +32,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from primitives.blocks import block_context, split_blocks
-from primitives.dbscan import dbscan_segments, default_eps
+from primitives.dbscan import dbscan_segments, default_eps, sparse_points
 from primitives.group import segment_contacts
 from primitives.normals import estimate_normals
 from primitives.ransac import RansacParams, efficient_ransac
@@ -93,6 +93,13 @@ class CoarseParams:
         Context around a block, metres; None = min(the tile buffer, 4 x the DBSCAN eps).
         Dense blocks are small (a 1 M-point block near a station can be 3 x 4 m), so a
         margin as wide as the tile buffer would multiply the points each block processes.
+    sparse_factor : float
+        Sparse second pass (docs/method.md): the points the first pass leaves unsegmented
+        whose spacing (to their 8th-nearest neighbour among all points) is at least this many
+        times the scan's (eps / 3) are segmented once more (normals, RANSAC, DBSCAN) with
+        RANSAC's epsilon and cell and the DBSCAN eps multiplied by ``2 x sparse_factor``
+        and the minimum support divided by its square (at least ``free_min_points``);
+        0 = one pass only.
     group_gap : float
         Element groups (docs/method.md): global segments whose points come within this
         many metres of each other (:func:`primitives.group.segment_contacts`) and that
@@ -118,11 +125,16 @@ class CoarseParams:
     radius_tol: float = 0.15
     block_points: int = 0
     block_margin: float | None = None
+    sparse_factor: float = 4.0
     group_gap: float = 0.6
     group_min_contacts: int = 3
     group_max_plane: float = 8.0
 
     def __post_init__(self) -> None:
+        if not (isinstance(self.sparse_factor, (int, float)) and math.isfinite(self.sparse_factor)
+                and (self.sparse_factor == 0 or self.sparse_factor >= 1)):
+            raise ConfigError(f"The 'sparse_factor' parameter of coarse must be 0 or a float in the range "
+                              f"[1.0, inf). Got {self.sparse_factor!r} instead.")
         if not (isinstance(self.group_gap, (int, float)) and math.isfinite(self.group_gap) and self.group_gap >= 0):
             raise ConfigError(f"The 'group_gap' parameter of coarse must be a float in the range [0.0, inf). "
                               f"Got {self.group_gap!r} instead.")
@@ -160,6 +172,7 @@ class CoarseParams:
         d.setdefault("block_points", 0)  # stores written before blocks existed: tiles whole
         d.setdefault("block_margin", None)
         d.setdefault("group_gap", 0.0)  # stores written before element groups: one group per segment
+        d.setdefault("sparse_factor", 0.0)  # stores written before the sparse pass: one pass
         d["ransac"] = RansacParams.from_dict(d["ransac"])
         return cls(**d)
 
@@ -171,9 +184,10 @@ def _tile_points(store: RunStore, tile: int, scale: np.ndarray) -> dict[str, np.
     return d
 
 
-def _segment_points(xyz: np.ndarray, params: CoarseParams, eps: float, rng: np.random.Generator
-                    ) -> tuple[np.ndarray, list[dict[str, Any]], np.ndarray]:
-    """Normals, Efficient RANSAC and DBSCAN on one set of points.
+def _segment_points(xyz: np.ndarray, params: CoarseParams, eps: float, rng: np.random.Generator,
+                    *, sparse_pass: bool = True) -> tuple[np.ndarray, list[dict[str, Any]], np.ndarray]:
+    """Normals, Efficient RANSAC and DBSCAN on one set of points, then (``sparse_factor``)
+    once more on the sparse points the first pass left unsegmented, at their own spacing.
 
     Returns the segment of every point (``1..S``, 0 = unsegmented), the fit of every
     segment (``fits[s - 1]``: ``kind``, ``params`` as a JSON list, ``rms``; kind
@@ -209,6 +223,23 @@ def _segment_points(xyz: np.ndarray, params: CoarseParams, eps: float, rng: np.r
     fits = [{"kind": "free", "params": "[]", "rms": float("nan")} if g == free else
             {"kind": prims[g].kind, "params": json.dumps(list(prims[g].params)), "rms": float(prims[g].rms)}
             for g in seg_group.tolist()]
+    if sparse_pass and params.sparse_factor > 0 and n:
+        # Far surfaces of a terrestrial scan are several times sparser than the ground
+        # near a station, which sets eps and the bitmap cell: there a second pass with
+        # every distance scaled by the sparse points' own spacing (docs/method.md).
+        spacing = eps / 3.0
+        rows, _ = sparse_points(xyz, segment == 0, spacing, params.sparse_factor)
+        if len(rows) >= params.free_min_points:
+            # One scale for every tile (not the tile's own sparse spacing): tiles of one
+            # scan must fit with the same parameters for the stitching to join them.
+            f = 2.0 * params.sparse_factor
+            r = params.ransac
+            sub = replace(params, ransac=replace(r, epsilon=r.epsilon * f, cluster_epsilon=r.cluster_epsilon * f,
+                                                 min_support=max(params.free_min_points, int(r.min_support / f**2))))
+            seg2, fits2, _ = _segment_points(xyz[rows], sub, eps * f, rng, sparse_pass=False)
+            got = seg2 > 0
+            segment[rows[got]] = seg2[got] + len(fits)
+            fits = fits + fits2
     return segment, fits, no_normal
 
 

@@ -141,7 +141,7 @@ def run_workflow(
                                     probability=cp.probability, shapes=tuple(cp.shapes)),
         cluster_epsilon=cp.cluster_epsilon, eps=cp.eps, min_samples=cp.min_samples, seed=cp.seed,
         free_segments=cp.free_segments, free_min_points=cp.free_min_points, block_points=cp.block_points,
-        block_margin=cp.block_margin, group_gap=cp.group_gap, group_min_contacts=cp.group_min_contacts,
+        block_margin=cp.block_margin, sparse_factor=cp.sparse_factor, group_gap=cp.group_gap, group_min_contacts=cp.group_min_contacts,
         group_max_plane=cp.group_max_plane,
     )
     made = make_synthetic_input(wf, progress=progress)

@@ -31,7 +31,7 @@ from primitives._validation import as_xyz as _as_xyz
 from primitives.stitch import UnionFind
 from tiling.errors import ConfigError
 
-__all__ = ["dbscan_labels", "dbscan_segments", "default_eps"]
+__all__ = ["dbscan_labels", "dbscan_segments", "default_eps", "sparse_points"]
 
 # Point pairs tested at once (bounds the temporary arrays: about 100 bytes per pair).
 _PAIR_BUDGET = 1 << 19
@@ -482,3 +482,36 @@ def _label_border(
         best = cand.min(axis=1)
         has = best != big
         labels[q[has]] = best[has]
+
+
+def sparse_points(xyz: npt.ArrayLike, mask: npt.ArrayLike, spacing: float, factor: float, *, k: int = 8
+                  ) -> tuple[npt.NDArray[np.int64], float]:
+    """Rows of ``mask`` whose local spacing is at least ``factor`` x ``spacing``.
+
+    The local spacing of a point is the distance to its ``k``-th nearest neighbour among
+    *all* points, so the stray edge points of a dense surface are not sparse. Used for
+    the coarse stage's sparse pass: far surfaces of a terrestrial scan, several times
+    sparser than the ground that sets ``eps``, are left unsegmented by the first pass.
+
+    Returns
+    -------
+    rows : ndarray of int64
+        The sparse rows, ascending.
+    median : float
+        Their median local spacing (0.0 when there are none).
+
+    Examples
+    --------
+    >>> dense = np.c_[np.arange(100) * 0.1, np.zeros(100), np.zeros(100)]
+    >>> sparse = np.c_[np.arange(20) * 1.0 + 50, np.zeros(20), np.zeros(20)]
+    >>> rows, med = sparse_points(np.r_[dense, sparse], np.arange(120) % 2 == 0, 0.1, 3.0, k=2)
+    >>> rows.min(), len(rows), med
+    (np.int64(100), 10, 1.0)
+    """
+    p = _as_xyz(xyz, "sparse_points")
+    rows = np.flatnonzero(np.asarray(mask, dtype=bool).reshape(-1))
+    if len(rows) == 0 or len(p) <= k:
+        return rows[:0].astype(np.int64), 0.0
+    d = cKDTree(p).query(p[rows], k=k + 1)[0][:, k]
+    keep = d >= factor * spacing
+    return rows[keep].astype(np.int64), float(np.median(d[keep])) if keep.any() else 0.0

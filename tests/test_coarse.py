@@ -104,7 +104,7 @@ def test_tables_and_csr(tiled20):
         members = indices[offsets[g - 1]:offsets[g]]
         assert (labels[members] == g).all()
         assert len(members) == (labels == g).sum() == table.column("n_points")[g - 1].as_py()
-    assert set(table.column("kind").to_pylist()) <= {"plane", "sphere", "cylinder", "cone", "torus"}
+    assert set(table.column("kind").to_pylist()) <= {"plane", "sphere", "cylinder", "cone", "torus", "free"}
 
 
 def test_rerun_is_resumed(tiled20, capsys):
@@ -172,3 +172,25 @@ def test_large_planes_are_never_grouped(scan, tmp_path):
     assert wide  # the minaret scene's ground is one
     assert all(sizes[grp[i]] == 1 for i in wide)
     assert (labels > 0).any()
+
+
+def test_sparse_pass_segments_a_far_thin_surface():
+    """A wall scanned 10x sparser than the ground that sets eps is segmented only by the
+    sparse pass (``sparse_factor``); the dense ground is segmented either way."""
+    from pipeline.coarse import _segment_points
+
+    rng = np.random.default_rng(1)
+    ground = np.c_[rng.uniform(0, 20, (160_000, 2)), rng.normal(0, 0.002, 160_000)]  # 0.05 m
+    n_far = 1_600
+    wall = np.c_[rng.uniform(40, 60, n_far), np.full(n_far, 30.0) + rng.normal(0, 0.01, n_far),
+                 rng.uniform(0, 20, n_far)]  # 20 x 20 m, 0.5 m spacing
+    xyz = np.r_[ground, wall]
+    eps = 0.15  # 3 x the ground's spacing, as the stage's default would set it
+    far = np.arange(len(ground), len(xyz))
+    one, _, _ = _segment_points(xyz, CoarseParams(sparse_factor=0.0), eps, np.random.default_rng(0))
+    two, fits, _ = _segment_points(xyz, CoarseParams(sparse_factor=4.0), eps, np.random.default_rng(0))
+    assert (one[far] > 0).mean() < 0.1
+    assert (two[far] > 0).mean() > 0.8
+    main_far = np.bincount(two[far][two[far] > 0]).argmax()
+    assert fits[main_far - 1]["kind"] == "plane"
+    assert (two[: len(ground)] > 0).mean() > 0.9

@@ -9,7 +9,7 @@ from sklearn.datasets import make_blobs
 from sklearn.metrics import adjusted_rand_score
 
 import primitives.dbscan as dbscan_module
-from primitives.dbscan import dbscan_labels, dbscan_segments, default_eps
+from primitives.dbscan import dbscan_labels, dbscan_segments, default_eps, sparse_points
 from tiling.errors import ConfigError
 
 
@@ -264,3 +264,16 @@ def test_segments_bad_labels() -> None:
         dbscan_segments(np.zeros((3, 3)), [0.5, 1, 2], eps=1.0, min_samples=2)
     with pytest.raises(ConfigError, match="'primitive_labels'"):
         dbscan_segments(np.zeros((3, 3)), [0, 1], eps=1.0, min_samples=2)
+
+
+def test_sparse_points_use_every_point_as_neighbour() -> None:
+    """Edge points of a dense surface are not sparse; a far, thinly scanned one is."""
+    rng = np.random.default_rng(0)
+    dense = np.c_[rng.uniform(0, 10, (40_000, 2)), np.zeros(40_000)]  # ~0.05 m spacing
+    far = np.c_[rng.uniform(30, 40, (400, 2)), np.zeros(400)]  # ~0.5 m spacing
+    xyz = np.r_[dense, far]
+    mask = np.r_[rng.random(40_000) < 0.05, np.ones(400, bool)]  # stray dense rows + the far ones
+    rows, med = sparse_points(xyz, mask, 0.05, 4.0)
+    assert set(rows.tolist()) == set(range(40_000, 40_400))
+    assert 0.4 < med < 1.0
+    assert sparse_points(xyz, np.zeros(len(xyz), bool), 0.05, 4.0)[0].size == 0
