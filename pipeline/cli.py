@@ -157,9 +157,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--block-points", type=_nonnegative_int, default=0,
                    help="segment tiles with more points in x-y blocks of at most this many, "
                         "joined like tiles (default 0 = never)")
-    c.add_argument("--sparse-factor", type=_non_negative, default=4.0,
+    c.add_argument("--sparse-factor", type=_non_negative, default=2.0,
                    help="segment the unsegmented points at least this many times sparser than the scan once "
-                        "more, every distance x (2 x this) (default 4; 0 = one pass)")
+                        "more, every distance x (2 x this) (default 2; 0 = one pass)")
     c.add_argument("--group-gap", type=_non_negative, default=0.6,
                    help="join touching segments (not large planes) within this many metres into element "
                         "groups for the tree (default 0.6; 0 = off)")

@@ -99,7 +99,8 @@ class CoarseParams:
         times the scan's (eps / 3) are segmented once more (normals, RANSAC, DBSCAN) with
         RANSAC's epsilon and cell and the DBSCAN eps multiplied by ``2 x sparse_factor``
         and the minimum support divided by its square (at least ``free_min_points``);
-        0 = one pass only.
+        each second-pass segment then joins the first-pass segments of the same primitive
+        it touches. 0 = one pass only.
     group_gap : float
         Element groups (docs/method.md): global segments whose points come within this
         many metres of each other (:func:`primitives.group.segment_contacts`) and that
@@ -125,7 +126,7 @@ class CoarseParams:
     radius_tol: float = 0.15
     block_points: int = 0
     block_margin: float | None = None
-    sparse_factor: float = 4.0
+    sparse_factor: float = 2.0
     group_gap: float = 0.6
     group_min_contacts: int = 3
     group_max_plane: float = 8.0
@@ -238,9 +239,39 @@ def _segment_points(xyz: np.ndarray, params: CoarseParams, eps: float, rng: np.r
                                                  min_support=max(params.free_min_points, int(r.min_support / f**2))))
             seg2, fits2, _ = _segment_points(xyz[rows], sub, eps * f, rng, sparse_pass=False)
             got = seg2 > 0
-            segment[rows[got]] = seg2[got] + len(fits)
+            n1 = len(fits)
+            segment[rows[got]] = seg2[got] + n1
             fits = fits + fits2
+            if fits2:
+                segment, fits = _join_passes(xyz, segment, fits, n1, eps * f, params)
     return segment, fits, no_normal
+
+
+def _join_passes(xyz: np.ndarray, segment: np.ndarray, fits: list[dict[str, Any]], n1: int, gap: float,
+                 params: CoarseParams) -> tuple[np.ndarray, list[dict[str, Any]]]:
+    """Join each sparse-pass segment (ids > ``n1``) to the first-pass segments it touches
+    (within ``gap``) that are the same primitive: the far, sparse part of a ground plane
+    is that plane. Without this, two tiles' stitching would join them where one tile saw
+    the part dense and the other sparse, and the answer would depend on the tile size."""
+    a, b, _ = segment_contacts(xyz, segment, gap, min_contacts=3)
+    cross = (a <= n1) & (b > n1)
+    a, b = a[cross], b[cross]
+    keep = np.array([_same_primitive(fits[i - 1], fits[j - 1], params) for i, j in zip(a.tolist(), b.tolist(),
+                                                                                        strict=True)], dtype=bool)
+    if not keep.any():
+        return segment, fits
+    uf = UnionFind(len(fits) + 1)
+    uf.union_pairs(a[keep], b[keep])
+    root = uf.find(np.arange(len(fits) + 1))
+    # Each joined set takes the id and fit of its lowest member (a first-pass segment).
+    low = np.full(len(fits) + 1, len(fits) + 1, dtype=np.int64)
+    np.minimum.at(low, root, np.arange(len(fits) + 1))
+    new_id = low[root]
+    live = np.unique(new_id[1:])
+    dense = np.zeros(len(fits) + 2, dtype=np.int64)
+    dense[live] = np.arange(1, len(live) + 1)
+    segment = np.where(segment > 0, dense[new_id[segment]], 0)
+    return segment, [fits[i - 1] for i in live.tolist()]
 
 
 def _segment_tile(xyz: np.ndarray, params: CoarseParams, eps: float, tile: int, margin: float

@@ -115,7 +115,7 @@ class CoarseSection(_Section):
     block_margin: PosFloat | None = Field(
         None, description="context around a block, metres; null = min(ingest buffer, 4 x eps)")
     sparse_factor: Annotated[float, Field(ge=0)] = Field(
-        4.0, description="unsegmented points at least this many times sparser than the scan are segmented once "
+        2.0, description="unsegmented points at least this many times sparser than the scan are segmented once "
                          "more with RANSAC and DBSCAN distances x (2 x this); 0 = one pass")
     group_gap: Annotated[float, Field(ge=0)] = Field(
         0.6, description="segments (not large planes) whose points come this close, metres, are one element "

@@ -194,3 +194,18 @@ def test_sparse_pass_segments_a_far_thin_surface():
     main_far = np.bincount(two[far][two[far] > 0]).argmax()
     assert fits[main_far - 1]["kind"] == "plane"
     assert (two[: len(ground)] > 0).mean() > 0.9
+
+
+def test_sparse_part_of_a_plane_joins_its_dense_part():
+    """Ground scanned densely near the station and sparsely beyond is one segment: the
+    sparse pass's plane is joined to the first pass's where they touch and agree."""
+    from pipeline.coarse import _segment_points
+
+    rng = np.random.default_rng(2)
+    near = np.c_[rng.uniform(0, 20, (160_000, 2)), rng.normal(0, 0.002, 160_000)]  # 0.05 m
+    far = np.c_[rng.uniform(20, 60, 12_800), rng.uniform(0, 20, 12_800), rng.normal(0, 0.01, 12_800)]  # 0.25 m
+    xyz = np.r_[near, far]
+    seg, fits, _ = _segment_points(xyz, CoarseParams(sparse_factor=2.0), 0.15, np.random.default_rng(0))
+    main_near = np.bincount(seg[: len(near)][seg[: len(near)] > 0]).argmax()
+    assert (seg[len(near):] == main_near).mean() > 0.8
+    assert fits[main_near - 1]["kind"] == "plane"
