@@ -188,7 +188,7 @@ def _tile_points(store: RunStore, tile: int, scale: np.ndarray) -> dict[str, np.
 def _segment_points(xyz: np.ndarray, params: CoarseParams, eps: float, rng: np.random.Generator,
                     *, sparse_pass: bool = True) -> tuple[np.ndarray, list[dict[str, Any]], np.ndarray]:
     """Normals, Efficient RANSAC and DBSCAN on one set of points, then (``sparse_factor``)
-    once more on the sparse points the first pass left unsegmented, at their own spacing.
+    once more, at a coarser scale, on the sparse points the first pass left unsegmented.
 
     Returns the segment of every point (``1..S``, 0 = unsegmented), the fit of every
     segment (``fits[s - 1]``: ``kind``, ``params`` as a JSON list, ``rms``; kind
@@ -227,7 +227,7 @@ def _segment_points(xyz: np.ndarray, params: CoarseParams, eps: float, rng: np.r
     if sparse_pass and params.sparse_factor > 0 and n:
         # Far surfaces of a terrestrial scan are several times sparser than the ground
         # near a station, which sets eps and the bitmap cell: there a second pass with
-        # every distance scaled by the sparse points' own spacing (docs/method.md).
+        # every distance scaled up (docs/method.md, "Sparse second pass").
         spacing = eps / 3.0
         rows, _ = sparse_points(xyz, segment == 0, spacing, params.sparse_factor)
         if len(rows) >= params.free_min_points:
