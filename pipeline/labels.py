@@ -15,7 +15,7 @@ Two phases of Dask tasks, each unit recorded after its data like every other sta
 Arrays written (``docs/store.md``), each of length = the number of input points::
 
     labels/class      uint8    the class vocabulary (tiling/classes.py); 0 = not labelled
-    labels/instance   uint32   element instance (or planar instance: one per planar class and coarse segment), unique in the store; 0 = none
+    labels/instance   uint32   element instance (or planar instance: one per planar class and element group), unique in the store; 0 = none
     labels/segment    uint64   tree leaf: global coarse segment << 20 | leaf node id; 0 = none
     labels/score      float32  the classifier's score of the point's class
     labels/primitive  uint8    coarse primitive (pipeline/coarse.py PRIMITIVE_CODES); 0 = none

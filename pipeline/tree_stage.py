@@ -15,7 +15,7 @@ Store layout written here (``docs/store.md``)::
     tree/batches/<b>/class     uint8  (n,)  class of each point
     tree/batches/<b>/instance  uint32 (n,)  instance, numbered within the batch; 0 = none: element
                                             instances of the tree, and one instance per planar
-                                            class (ground, wall, roof) and coarse segment
+                                            class (ground, wall, roof) and element group
     tree/batches/<b>/score     float32(n,)  the classifier's score of the leaf
     tree/tables/<b>.parquet                 the batch's tree nodes (``segment``: the first
                                             global segment of the node's group)
@@ -187,7 +187,7 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
         node_inst = np.zeros(len(res.nodes), np.int64)
         node_inst[res.instance_node] = np.arange(1, len(res.instance_node) + 1) + n_inst
         n_inst += len(res.instance_node)
-        # Planar classes are one instance per class and coarse segment (METHOD.md, "Classes").
+        # Planar classes are one instance per class and element group (one tree; METHOD.md, "Classes").
         planar = np.isin(res_class, _PLANAR) & (res.instance == 0)
         for c in np.unique(res_class[planar]).tolist():
             n_inst += 1
