@@ -72,7 +72,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -82,6 +82,13 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from primitives.score import (
+    FUSED_KINDS,
+    PointColumns,
+    compatible_counts,
+    compatible_mask,
+    point_columns,
+)
 from primitives.shapes import (
     DEFAULT_KINDS,
     KINDS,
@@ -108,8 +115,12 @@ FIRST_BATCH = 512  # minimal sets per batch after an extraction; doubles up to M
 MAX_BATCH = 8192
 MAX_POOL = 4096  # candidates kept between batches (the best by upper bound)
 LEVEL_MIX = 0.9  # x of §4.3.1
-CHUNK_ELEMENTS = 1 << 21  # candidate x point elements per scoring block
-POINT_CHUNK = 1 << 16  # points per block when one candidate meets all live points
+# Scoring blocks are sized to stay in a core's L2 cache: a block's float64 temporaries
+# (candidates x points) are 512 KB each. Blocks of 2 M elements were memory-bound and
+# 2.5-3x slower (docs/benchmarks.md, "Coarse segmentation", 2026-11-25).
+CHUNK_ELEMENTS = 1 << 16  # candidate x point elements per scoring block
+MIN_BLOCK_CANDIDATES = 32  # candidates per block at least (keeps the matrix products efficient)
+POINT_CHUNK = 1 << 14  # points per block when one candidate meets all live points
 SPARSE_FACTOR = 4  # bitmaps with more cells than 4x the points are labelled sparsely
 SCORE_TOLERANCE = 0.05  # candidates within 5 % of the best are not told apart
 DUPLICATE_SHARE = 0.5  # share of a candidate's first-subset hits that makes it a known surface
@@ -336,6 +347,15 @@ def _empty(n: int, reason: str) -> RansacResult:
                         stop_reason=reason, failure=FailedFit(reason=reason))
 
 
+def _blocks(rows: npt.NDArray[np.int64], n_points: int) -> Iterator[tuple[npt.NDArray[np.int64], slice]]:
+    """Cache-sized blocks (candidate rows, point slice) covering ``rows`` x ``n_points``."""
+    kb = max(MIN_BLOCK_CANDIDATES, CHUNK_ELEMENTS // max(n_points, 1))
+    pb = max(1, CHUNK_ELEMENTS // kb)
+    for a in range(0, len(rows), kb):
+        for b in range(0, n_points, pb):
+            yield rows[a:a + kb], slice(b, b + pb)
+
+
 # ------------------------------------------------------------------------- search
 class _Search:
     """The state of one run: live points, octree order, subsets and the candidate pool."""
@@ -352,7 +372,7 @@ class _Search:
         self.npx = np.einsum("ij,ij->i", N, P)
         # Contiguous copies of the live points (compacted after each extraction).
         self.live = np.arange(m)
-        self.Pl, self.Nl, self.ppl, self.npl = P, N, self.pp, self.npx
+        self.Cl = point_columns(P, N, self.pp, self.npx)
         self.k = max(MINIMAL_SET_SIZE[k] for k in kinds)
         # Octree as one Morton order: every cell of every level is a contiguous run.
         lo = P.min(axis=0)
@@ -385,22 +405,35 @@ class _Search:
         while bounds[-1] < len(perm):
             bounds.append(min(len(perm), bounds[-1] + max(FIRST_SUBSET, bounds[-1])))
         self.subsets = [perm[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+        self._gathered: dict[int, tuple[F64, F64, F64, F64, PointColumns]] = {}
         self.n_at_subsets = self.n_alive
 
+    def _subset_points(self, subset: int) -> tuple[F64, F64, F64, F64, PointColumns]:
+        """Live points of ``subset`` (xyz, normals, |x|^2, n . x, and the same as columns for
+        the fused kernels), gathered once per extraction."""
+        got = self._gathered.get(subset)
+        if got is None:
+            idx = self.subsets[subset]
+            idx = idx[self.alive[idx]]
+            P, N, pp, npx = self.P[idx], self.N[idx], self.pp[idx], self.npx[idx]
+            got = self._gathered[subset] = (P, N, pp, npx, point_columns(P, N, pp, npx))
+        return got
+
     def _count(self, kind_id: npt.NDArray[np.int64], params: F64, subset: int) -> tuple[F64, int]:
-        idx = self.subsets[subset]
-        idx = idx[self.alive[idx]]
-        P, N, pp, npx = self.P[idx], self.N[idx], self.pp[idx], self.npx[idx]
+        P, N, pp, npx, cols = self._subset_points(subset)
+        n = len(pp)
         counts = np.zeros(len(params))
-        step = max(1, CHUNK_ELEMENTS // max(len(idx), 1))
         for kid in np.unique(kind_id):
             rows = np.flatnonzero(kind_id == kid)
-            for a in range(0, len(rows), step):
-                r = rows[a:a + step]
-                ok = compatible(self.kinds[kid], params[r], P, N, epsilon=self.eps, cos_alpha=self.cos_a,
-                                sq_norm=pp, normal_dot=npx)
-                counts[r] = np.count_nonzero(ok, axis=1)
-        return counts, len(idx)
+            if self.kinds[kid] in FUSED_KINDS:
+                counts[rows] = compatible_counts(self.kinds[kid], params[rows], cols, epsilon=self.eps,
+                                                 cos_alpha=self.cos_a)
+                continue
+            for r, sl in _blocks(rows, n):
+                ok = compatible(self.kinds[kid], params[r], P[sl], N[sl], epsilon=self.eps,
+                                cos_alpha=self.cos_a, sq_norm=pp[sl], normal_dot=npx[sl])
+                counts[r] += np.count_nonzero(ok, axis=1)
+        return counts, n
 
     def _score_next(self, rows: npt.NDArray[np.int64]) -> None:
         """Score ``rows`` of the pool on their next subset."""
@@ -518,11 +551,15 @@ class _Search:
     def inliers(self, kind: str, params: F64) -> npt.NDArray[np.int64]:
         """Live points compatible with the primitive, in its largest bitmap component."""
         hits = []
-        for a in range(0, len(self.live), POINT_CHUNK):
-            sl = slice(a, a + POINT_CHUNK)
-            ok = compatible(kind, params[None], self.Pl[sl], self.Nl[sl], epsilon=self.eps,
-                            cos_alpha=self.cos_a, sq_norm=self.ppl[sl], normal_dot=self.npl[sl])
-            hits.append(np.flatnonzero(ok[0]) + a)
+        if kind in FUSED_KINDS:
+            ok = compatible_mask(kind, params[None], self.Cl, epsilon=self.eps, cos_alpha=self.cos_a)
+            hits.append(np.flatnonzero(ok[0]))
+        else:
+            for a in range(0, len(self.live), POINT_CHUNK):
+                P, N, pp, npx = self.Cl.rows(slice(a, a + POINT_CHUNK))
+                ok = compatible(kind, params[None], P, N, epsilon=self.eps, cos_alpha=self.cos_a,
+                                sq_norm=pp, normal_dot=npx)
+                hits.append(np.flatnonzero(ok[0]) + a)
         idx = self.live[np.concatenate(hits)] if hits else np.zeros(0, dtype=np.int64)
         if len(idx) < 2:
             return idx
@@ -553,14 +590,18 @@ class _Search:
 
     def _compatible_first(self, rows: npt.NDArray[np.int64]) -> npt.NDArray[np.bool_]:
         """Compatibility of candidates ``rows`` with the live points of the first subset."""
-        idx = self.subsets[0]
-        idx = idx[self.alive[idx]]
-        out = np.zeros((len(rows), len(idx)), dtype=bool)
+        P, N, pp, npx, cols = self._subset_points(0)
+        out = np.zeros((len(rows), len(pp)), dtype=bool)
         for kid in np.unique(self.kind_id[rows]):
-            r = np.flatnonzero(self.kind_id[rows] == kid)
-            out[r] = compatible(self.kinds[kid], self.params[rows[r]], self.P[idx], self.N[idx],
-                                epsilon=self.eps, cos_alpha=self.cos_a, sq_norm=self.pp[idx],
-                                normal_dot=self.npx[idx])
+            sel = np.flatnonzero(self.kind_id[rows] == kid)
+            if self.kinds[kid] in FUSED_KINDS:
+                out[sel] = compatible_mask(self.kinds[kid], self.params[rows[sel]], cols, epsilon=self.eps,
+                                           cos_alpha=self.cos_a)
+                continue
+            for r, sl in _blocks(sel, len(pp)):
+                out[r, sl] = compatible(self.kinds[kid], self.params[rows[r]], P[sl], N[sl],
+                                        epsilon=self.eps, cos_alpha=self.cos_a, sq_norm=pp[sl],
+                                        normal_dot=npx[sl])
         return out
 
     def extract(self, b: int) -> tuple[str, F64, npt.NDArray[np.int64]] | None:
@@ -577,12 +618,13 @@ class _Search:
         if len(idx) < self.min_support:
             return None
         self.alive[idx] = False
+        self._gathered.clear()
         self.n_alive -= len(idx)
         keep = self.alive[self.order]
         self.order, self.codes = self.order[keep], self.codes[keep]
         keep = self.alive[self.live]
         self.live = self.live[keep]
-        self.Pl, self.Nl, self.ppl, self.npl = self.Pl[keep], self.Nl[keep], self.ppl[keep], self.npl[keep]
+        self.Cl = self.Cl.take(keep)
         self.level_score *= 0.5
         self.templates = []
         if self.n_alive < 0.5 * self.n_at_subsets:

@@ -179,3 +179,30 @@ def test_bad_parameters(kwargs: dict, match: str) -> None:
 def test_bad_xyz(xyz: np.ndarray) -> None:
     with pytest.raises(ConfigError, match="'xyz' parameter of estimate_normals"):
         estimate_normals(xyz)
+
+
+def test_closed_form_eigen_matches_lapack() -> None:
+    """The closed-form 3 x 3 eigensolver of the PCA against np.linalg.eigh: random
+    planar-ish and general neighbourhoods, and the degenerate cases (zero matrix, isotropic,
+    rank one) that it hands to LAPACK."""
+    from primitives.normals import _sym3_eigen
+
+    rng = np.random.default_rng(7)
+    m = 4000
+    pts = rng.normal(size=(m, 16, 3)) * rng.choice([[1.0, 0.7, 0.01], [1.0, 1.0, 0.05], [1.0, 0.5, 0.3]], m)[:, None]
+    rot = np.linalg.qr(rng.normal(size=(m, 3, 3)))[0]
+    pts = np.einsum("mkj,mij->mki", pts, rot)
+    pts -= pts.mean(axis=1, keepdims=True)
+    cov = np.einsum("mki,mkj->mij", pts, pts)
+    line = np.outer([1.0, 2, 3], [1.0, 2, 3])
+    cov = np.concatenate([cov, [np.zeros((3, 3)), 2.5 * np.eye(3), line]])
+    evals, vec = _sym3_eigen({(a, b): cov[:, a, b].copy() for a in range(3) for b in range(a, 3)})
+    ref_vals, ref_vecs = np.linalg.eigh(cov)
+    scale = ref_vals[:, 2:3] + 1e-300
+    np.testing.assert_allclose(evals / scale, ref_vals / scale, atol=1e-9)
+    planar = ref_vals[:m, 1] > 10 * ref_vals[:m, 0]  # a well-defined smallest eigenvector
+    assert planar.mean() > 0.5
+    dots = np.abs(np.einsum("ij,ij->i", vec[:m][planar], ref_vecs[:m, :, 0][planar]))
+    assert dots.min() > 1 - 1e-9
+    np.testing.assert_allclose(np.linalg.norm(vec[:m], axis=1), 1.0)
+    assert evals[-1, 1] <= 1e-12 * evals[-1, 2]  # a line stays collinear (fails the normal test)
