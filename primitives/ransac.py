@@ -88,6 +88,7 @@ from primitives.score import (
     compatible_counts,
     compatible_mask,
     point_columns,
+    shared_hits,
 )
 from primitives.shapes import (
     DEFAULT_KINDS,
@@ -372,7 +373,8 @@ class _Search:
         self.npx = np.einsum("ij,ij->i", N, P)
         # Contiguous copies of the live points (compacted after each extraction).
         self.live = np.arange(m)
-        self.Cl = point_columns(P, N, self.pp, self.npx)
+        self.C = point_columns(P, N, self.pp, self.npx)  # all points, as columns
+        self.Cl = self.C  # the live points (compacted after each extraction)
         self.k = max(MINIMAL_SET_SIZE[k] for k in kinds)
         # Octree as one Morton order: every cell of every level is a contiguous run.
         lo = P.min(axis=0)
@@ -395,6 +397,10 @@ class _Search:
         self.s = np.zeros(0)  # live points looked at so far
         self.n_eval = np.zeros(0, dtype=np.int64)  # subsets evaluated
         self.exact = np.zeros(0, dtype=bool)  # score is the connected component on all points
+        # Cached compatibility with the live points of the first subset (for the templates),
+        # valid where hits_ok, until the next extraction.
+        self.hits = np.zeros((0, 0), dtype=bool)
+        self.hits_ok = np.zeros(0, dtype=bool)
         self.templates: list[tuple[npt.NDArray[np.bool_], float]] = []  # (first-subset hits, cut)
 
     # --------------------------------------------------------------- subsets
@@ -405,23 +411,20 @@ class _Search:
         while bounds[-1] < len(perm):
             bounds.append(min(len(perm), bounds[-1] + max(FIRST_SUBSET, bounds[-1])))
         self.subsets = [perm[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
-        self._gathered: dict[int, tuple[F64, F64, F64, F64, PointColumns]] = {}
+        self._gathered: dict[int, PointColumns] = {}
         self.n_at_subsets = self.n_alive
 
-    def _subset_points(self, subset: int) -> tuple[F64, F64, F64, F64, PointColumns]:
-        """Live points of ``subset`` (xyz, normals, |x|^2, n . x, and the same as columns for
-        the fused kernels), gathered once per extraction."""
+    def _subset_points(self, subset: int) -> PointColumns:
+        """Live points of ``subset`` as columns, gathered once per extraction."""
         got = self._gathered.get(subset)
         if got is None:
             idx = self.subsets[subset]
-            idx = idx[self.alive[idx]]
-            P, N, pp, npx = self.P[idx], self.N[idx], self.pp[idx], self.npx[idx]
-            got = self._gathered[subset] = (P, N, pp, npx, point_columns(P, N, pp, npx))
+            got = self._gathered[subset] = self.C.take(idx[self.alive[idx]])
         return got
 
     def _count(self, kind_id: npt.NDArray[np.int64], params: F64, subset: int) -> tuple[F64, int]:
-        P, N, pp, npx, cols = self._subset_points(subset)
-        n = len(pp)
+        cols = self._subset_points(subset)
+        n = len(cols)
         counts = np.zeros(len(params))
         for kid in np.unique(kind_id):
             rows = np.flatnonzero(kind_id == kid)
@@ -430,8 +433,9 @@ class _Search:
                                                  cos_alpha=self.cos_a)
                 continue
             for r, sl in _blocks(rows, n):
-                ok = compatible(self.kinds[kid], params[r], P[sl], N[sl], epsilon=self.eps,
-                                cos_alpha=self.cos_a, sq_norm=pp[sl], normal_dot=npx[sl])
+                P, N, pp, npx = cols.rows(sl)
+                ok = compatible(self.kinds[kid], params[r], P, N, epsilon=self.eps,
+                                cos_alpha=self.cos_a, sq_norm=pp, normal_dot=npx)
                 counts[r] += np.count_nonzero(ok, axis=1)
         return counts, n
 
@@ -508,6 +512,8 @@ class _Search:
         self.s = np.concatenate([self.s, np.zeros(len(kind_id))])
         self.n_eval = np.concatenate([self.n_eval, np.zeros(len(kind_id), dtype=np.int64)])
         self.exact = np.concatenate([self.exact, np.zeros(len(kind_id), dtype=bool)])
+        self.hits = np.concatenate([self.hits, np.zeros((len(kind_id), self.hits.shape[1]), dtype=bool)])
+        self.hits_ok = np.concatenate([self.hits_ok, np.zeros(len(kind_id), dtype=bool)])
         new = np.arange(start, len(self.kind_id))
         self._score_next(new)
         if self.templates:
@@ -529,7 +535,7 @@ class _Search:
         self._take(np.flatnonzero(keep))
 
     def _take(self, rows: npt.NDArray[np.int64]) -> None:
-        for name in ("kind_id", "params", "level", "x", "s", "n_eval", "exact"):
+        for name in ("kind_id", "params", "level", "x", "s", "n_eval", "exact", "hits", "hits_ok"):
             setattr(self, name, getattr(self, name)[rows])
 
     # ---------------------------------------------------------- selection
@@ -583,26 +589,32 @@ class _Search:
 
     def _apply_templates(self, rows: npt.NDArray[np.int64], hits: npt.NDArray[np.bool_],
                          templates: list[tuple[npt.NDArray[np.bool_], float]]) -> None:
-        own = np.maximum(hits.sum(axis=1), 1)
         for mask, ratio in templates:
-            same = ((hits & mask).sum(axis=1) >= DUPLICATE_SHARE * own) & ~self.exact[rows]
+            own, shared = shared_hits(hits, mask)
+            same = (shared >= DUPLICATE_SHARE * np.maximum(own, 1)) & ~self.exact[rows]
             self.x[rows[same]] *= ratio
 
     def _compatible_first(self, rows: npt.NDArray[np.int64]) -> npt.NDArray[np.bool_]:
-        """Compatibility of candidates ``rows`` with the live points of the first subset."""
-        P, N, pp, npx, cols = self._subset_points(0)
-        out = np.zeros((len(rows), len(pp)), dtype=bool)
-        for kid in np.unique(self.kind_id[rows]):
-            sel = np.flatnonzero(self.kind_id[rows] == kid)
+        """Compatibility of candidates ``rows`` with the live points of the first subset
+        (cached per candidate until the next extraction)."""
+        cols = self._subset_points(0)
+        n = len(cols)
+        if self.hits.shape[1] != n:
+            self.hits = np.zeros((len(self.kind_id), n), dtype=bool)
+            self.hits_ok[:] = False
+        todo = rows[~self.hits_ok[rows]]
+        for kid in np.unique(self.kind_id[todo]):
+            sel = todo[self.kind_id[todo] == kid]
             if self.kinds[kid] in FUSED_KINDS:
-                out[sel] = compatible_mask(self.kinds[kid], self.params[rows[sel]], cols, epsilon=self.eps,
-                                           cos_alpha=self.cos_a)
+                self.hits[sel] = compatible_mask(self.kinds[kid], self.params[sel], cols, epsilon=self.eps,
+                                                 cos_alpha=self.cos_a)
                 continue
-            for r, sl in _blocks(sel, len(pp)):
-                out[r, sl] = compatible(self.kinds[kid], self.params[rows[r]], P[sl], N[sl],
-                                        epsilon=self.eps, cos_alpha=self.cos_a, sq_norm=pp[sl],
-                                        normal_dot=npx[sl])
-        return out
+            for r, sl in _blocks(sel, n):
+                P, N, pp, npx = cols.rows(sl)
+                self.hits[r, sl] = compatible(self.kinds[kid], self.params[r], P, N, epsilon=self.eps,
+                                              cos_alpha=self.cos_a, sq_norm=pp, normal_dot=npx)
+        self.hits_ok[todo] = True
+        return self.hits[rows]
 
     def extract(self, b: int) -> tuple[str, F64, npt.NDArray[np.int64]] | None:
         """Refit candidate ``b``, take its inliers out; None if it falls below min_support."""
@@ -619,6 +631,7 @@ class _Search:
             return None
         self.alive[idx] = False
         self._gathered.clear()
+        self.hits_ok[:] = False
         self.n_alive -= len(idx)
         keep = self.alive[self.order]
         self.order, self.codes = self.order[keep], self.codes[keep]

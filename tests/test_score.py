@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from primitives.score import FUSED_KINDS, compatible_counts, compatible_mask, point_columns
+from primitives.score import (
+    FUSED_KINDS,
+    compatible_counts,
+    compatible_mask,
+    point_columns,
+    shared_hits,
+)
 from primitives.shapes import candidates_from_minimal_sets, compatible, distance_and_cosine
 
 EPS, COS_A = 0.05, 0.9
@@ -84,3 +90,14 @@ def test_point_columns_take_and_rows_round_trip():
     np.testing.assert_array_equal(n, nrm[keep])
     np.testing.assert_allclose(pp, (xyz[keep] ** 2).sum(axis=1))
     np.testing.assert_allclose(npx, (xyz[keep] * nrm[keep]).sum(axis=1))
+
+
+def test_shared_hits_matches_numpy():
+    rng = np.random.default_rng(5)
+    hits = rng.random((37, 301)) < 0.3
+    mask = rng.random(301) < 0.5
+    own, shared = shared_hits(hits, mask)
+    np.testing.assert_array_equal(own, hits.sum(axis=1))
+    np.testing.assert_array_equal(shared, (hits & mask).sum(axis=1))
+    own, shared = shared_hits(np.zeros((0, 4), dtype=bool), np.ones(4, dtype=bool))
+    assert own.shape == shared.shape == (0,)
