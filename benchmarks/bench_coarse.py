@@ -15,6 +15,9 @@ runs and times:
   inside the C++ code is reported instead of ending the benchmark. Its timings cover the
   C++ calls only; moving points in and labels out of the bindings (a binary PLY file
   and a SWIG iterator) is timed apart as "I/O" and left out of the ratio;
+* **Open3D** (``open3d``, if installed): the same loop with ``segment_plane``
+  (``distance_threshold=0.03``, ``ransac_n=3``, ``--open3d-iters`` iterations per plane),
+  Open3D's own multi-threaded RANSAC;
 * **pyransac3d**: a plain sequential RANSAC loop (no normals, no connectivity):
   ``pyransac3d.Plane().fit(points, thresh=0.03, maxIteration=...)`` on the remaining
   points, inliers removed, until fewer than ``min_support`` points remain, the plane
@@ -335,6 +338,41 @@ def run_pyransac(xyz: np.ndarray, *, thresh: float, iters: int, min_support: int
                 kinds={"plane": n_planes}, stop=stop)
 
 
+# ---------------------------------------------------------------------------- Open3D
+def run_open3d(xyz: np.ndarray, *, thresh: float, iters: int, min_support: int,
+               max_planes: int, time_cap: float) -> dict:
+    """Open3D's ``segment_plane`` loop (the usual recipe): fit the best plane of the remaining
+    points, take its inliers out, repeat; same stop rules as the pyransac3d loop."""
+    import open3d as o3d
+
+    o3d.utility.random.seed(0)
+    labels = np.full(len(xyz), -1, dtype=np.int64)
+    rest = np.arange(len(xyz))
+    stop = "fewer than min_support points remain"
+    t0 = time.perf_counter()
+    n_planes = 0
+    while len(rest) >= min_support:
+        if n_planes >= max_planes:
+            stop = f"{max_planes} planes (cap)"
+            break
+        if time.perf_counter() - t0 > time_cap:
+            stop = f"time cap {time_cap:.0f} s"
+            break
+        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz[rest]))
+        _, inl = pcd.segment_plane(distance_threshold=thresh, ransac_n=3, num_iterations=iters)
+        inl = np.asarray(inl, dtype=np.int64)
+        if len(inl) < min_support:
+            stop = "best plane below min_support"
+            break
+        labels[rest[inl]] = n_planes
+        n_planes += 1
+        mask = np.ones(len(rest), dtype=bool)
+        mask[inl] = False
+        rest = rest[mask]
+    return dict(ransac_s=time.perf_counter() - t0, labels=labels, n_shapes=n_planes,
+                kinds={"plane": n_planes}, stop=stop)
+
+
 # ----------------------------------------------------------------------------- table
 def fmt(x: float | None, nd: int = 1) -> str:
     if x is None or (isinstance(x, float) and math.isnan(x)):
@@ -450,6 +488,27 @@ def bench_site(site: str, args: argparse.Namespace, tmp: Path) -> dict:
             notes.append(f"pyransac3d FAILED: {type(exc).__name__}: {exc}")
             traceback.print_exc()
 
+    # Open3D
+    if not args.no_open3d:
+        try:
+            od = run_open3d(xyz, thresh=0.03, iters=args.open3d_iters, min_support=200,
+                            max_planes=args.pyransac_max_planes, time_cap=args.pyransac_time_cap)
+            q = evaluate(gt_cls, gt_inst, od["labels"])
+            lines.append(row(f"Open3D segment_plane loop ({args.open3d_iters} it/plane)", q,
+                             normals=None, prim=od["ransac_s"], dbscan=None, n_shapes=od["n_shapes"]))
+            split, t_split = split_by_dbscan(xyz, od["labels"], eps)
+            q2 = evaluate(gt_cls, gt_inst, split)
+            lines.append(row("Open3D + our DBSCAN split", q2, normals=None,
+                             prim=od["ransac_s"], dbscan=t_split, n_shapes=od["n_shapes"]))
+            notes.append(f"Open3D: {od['n_shapes']} planes, stop: {od['stop']}")
+            summary["open3d"] = dict(ransac_s=od["ransac_s"], recall=q["recall"], recall_split=q2["recall"])
+            print(f"  Open3D done: {od['ransac_s']:.1f} s", flush=True)
+        except ImportError as exc:
+            notes.append(f"Open3D not run: {exc} (pip install open3d; it needs Debian's libusb-1.0-0)")
+        except Exception as exc:  # noqa: BLE001
+            notes.append(f"Open3D FAILED: {type(exc).__name__}: {exc}")
+            traceback.print_exc()
+
     n_gt = summary.get("n_gt", {})
     print(f"\nGround-truth instances (>= {MIN_GT_POINTS} points): {n_gt}\n")
     print(HEADER)
@@ -480,6 +539,8 @@ def main() -> None:
     ap.add_argument("--cgal-normals", choices=["pca", "jet"], default="pca")
     ap.add_argument("--cgal-timeout", type=float, default=600.0)
     ap.add_argument("--no-pyransac", action="store_true")
+    ap.add_argument("--no-open3d", action="store_true")
+    ap.add_argument("--open3d-iters", type=int, default=1000, help="RANSAC iterations per Open3D plane")
     ap.add_argument("--pyransac-iters", type=int, default=200)
     ap.add_argument("--pyransac-max-planes", type=int, default=30)
     ap.add_argument("--pyransac-time-cap", type=float, default=90.0)
