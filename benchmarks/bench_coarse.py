@@ -52,6 +52,7 @@ import time
 import traceback
 from collections import Counter
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -305,72 +306,59 @@ def run_cgal(xyz: np.ndarray, settings: list[dict], tmp: Path, normals: str, k: 
     return res
 
 
-# ------------------------------------------------------------------------ pyransac3d
+# ------------------------------------------------------------- plane loops (peers)
+def _plane_loop(xyz: np.ndarray, fit: Any, *, min_support: int, max_planes: int, time_cap: float) -> dict:
+    """The usual recipe with a plane-only RANSAC: ``fit(points)`` returns the inlier rows of
+    the best plane of the remaining points; take them out and repeat until fewer than
+    ``min_support`` points remain, the plane cap or the time cap is reached, or a fit
+    returns fewer than ``min_support`` inliers."""
+    labels = np.full(len(xyz), -1, dtype=np.int64)
+    rest = np.arange(len(xyz))
+    stop = "fewer than min_support points remain"
+    t0 = time.perf_counter()
+    n_planes = 0
+    while len(rest) >= min_support:
+        if n_planes >= max_planes:
+            stop = f"{max_planes} planes (cap)"
+            break
+        if time.perf_counter() - t0 > time_cap:
+            stop = f"time cap {time_cap:.0f} s"
+            break
+        inl = np.asarray(fit(xyz[rest]), dtype=np.int64)
+        if len(inl) < min_support:
+            stop = "best plane below min_support"
+            break
+        labels[rest[inl]] = n_planes
+        n_planes += 1
+        mask = np.ones(len(rest), dtype=bool)
+        mask[inl] = False
+        rest = rest[mask]
+    return dict(ransac_s=time.perf_counter() - t0, labels=labels, n_shapes=n_planes,
+                kinds={"plane": n_planes}, stop=stop)
+
+
 def run_pyransac(xyz: np.ndarray, *, thresh: float, iters: int, min_support: int,
                  max_planes: int, time_cap: float) -> dict:
     import pyransac3d
 
     random.seed(0)
     np.random.seed(0)
-    labels = np.full(len(xyz), -1, dtype=np.int64)
-    rest = np.arange(len(xyz))
-    stop = "fewer than min_support points remain"
-    t0 = time.perf_counter()
-    n_planes = 0
-    while len(rest) >= min_support:
-        if n_planes >= max_planes:
-            stop = f"{max_planes} planes (cap)"
-            break
-        if time.perf_counter() - t0 > time_cap:
-            stop = f"time cap {time_cap:.0f} s"
-            break
-        _, inl = pyransac3d.Plane().fit(xyz[rest], thresh=thresh, maxIteration=iters)
-        inl = np.asarray(inl, dtype=np.int64)
-        if len(inl) < min_support:
-            stop = "best plane below min_support"
-            break
-        labels[rest[inl]] = n_planes
-        n_planes += 1
-        mask = np.ones(len(rest), dtype=bool)
-        mask[inl] = False
-        rest = rest[mask]
-    return dict(ransac_s=time.perf_counter() - t0, labels=labels, n_shapes=n_planes,
-                kinds={"plane": n_planes}, stop=stop)
+    return _plane_loop(xyz, lambda pts: pyransac3d.Plane().fit(pts, thresh=thresh, maxIteration=iters)[1],
+                       min_support=min_support, max_planes=max_planes, time_cap=time_cap)
 
 
-# ---------------------------------------------------------------------------- Open3D
 def run_open3d(xyz: np.ndarray, *, thresh: float, iters: int, min_support: int,
                max_planes: int, time_cap: float) -> dict:
-    """Open3D's ``segment_plane`` loop (the usual recipe): fit the best plane of the remaining
-    points, take its inliers out, repeat; same stop rules as the pyransac3d loop."""
+    """Open3D's ``segment_plane`` (its own multi-threaded RANSAC) in the same loop."""
     import open3d as o3d
 
     o3d.utility.random.seed(0)
-    labels = np.full(len(xyz), -1, dtype=np.int64)
-    rest = np.arange(len(xyz))
-    stop = "fewer than min_support points remain"
-    t0 = time.perf_counter()
-    n_planes = 0
-    while len(rest) >= min_support:
-        if n_planes >= max_planes:
-            stop = f"{max_planes} planes (cap)"
-            break
-        if time.perf_counter() - t0 > time_cap:
-            stop = f"time cap {time_cap:.0f} s"
-            break
-        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz[rest]))
-        _, inl = pcd.segment_plane(distance_threshold=thresh, ransac_n=3, num_iterations=iters)
-        inl = np.asarray(inl, dtype=np.int64)
-        if len(inl) < min_support:
-            stop = "best plane below min_support"
-            break
-        labels[rest[inl]] = n_planes
-        n_planes += 1
-        mask = np.ones(len(rest), dtype=bool)
-        mask[inl] = False
-        rest = rest[mask]
-    return dict(ransac_s=time.perf_counter() - t0, labels=labels, n_shapes=n_planes,
-                kinds={"plane": n_planes}, stop=stop)
+
+    def fit(pts: np.ndarray) -> Any:
+        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+        return pcd.segment_plane(distance_threshold=thresh, ransac_n=3, num_iterations=iters)[1]
+
+    return _plane_loop(xyz, fit, min_support=min_support, max_planes=max_planes, time_cap=time_cap)
 
 
 # ----------------------------------------------------------------------------- table
@@ -469,45 +457,36 @@ def bench_site(site: str, args: argparse.Namespace, tmp: Path) -> dict:
                              f"labels out {run['io_s']:.1f} s) not counted")
             print(f"  CGAL done: normals {nrm:.1f} s", flush=True)
 
-    # pyransac3d
+    # plane-loop peers
+    peers = []
     if not args.no_pyransac:
-        try:
-            pr = run_pyransac(xyz, thresh=0.03, iters=args.pyransac_iters, min_support=200,
-                              max_planes=args.pyransac_max_planes, time_cap=args.pyransac_time_cap)
-            q = evaluate(gt_cls, gt_inst, pr["labels"])
-            lines.append(row(f"pyransac3d plane loop ({args.pyransac_iters} it/plane)", q,
-                             normals=None, prim=pr["ransac_s"], dbscan=None, n_shapes=pr["n_shapes"]))
-            split, t_split = split_by_dbscan(xyz, pr["labels"], eps)
-            q2 = evaluate(gt_cls, gt_inst, split)
-            lines.append(row("pyransac3d + our DBSCAN split", q2, normals=None,
-                             prim=pr["ransac_s"], dbscan=t_split, n_shapes=pr["n_shapes"]))
-            notes.append(f"pyransac3d: {pr['n_shapes']} planes, stop: {pr['stop']}")
-            summary["pyransac3d"] = dict(ransac_s=pr["ransac_s"], recall=q["recall"])
-            print(f"  pyransac3d done: {pr['ransac_s']:.1f} s", flush=True)
-        except Exception as exc:  # noqa: BLE001
-            notes.append(f"pyransac3d FAILED: {type(exc).__name__}: {exc}")
-            traceback.print_exc()
-
-    # Open3D
+        peers.append(("pyransac3d", f"pyransac3d plane loop ({args.pyransac_iters} it/plane)", run_pyransac,
+                      args.pyransac_iters))
     if not args.no_open3d:
+        peers.append(("open3d", f"Open3D segment_plane loop ({args.open3d_iters} it/plane)", run_open3d,
+                      args.open3d_iters))
+    for key, label, run, iters in peers:
+        name = label.split(" ")[0]
         try:
-            od = run_open3d(xyz, thresh=0.03, iters=args.open3d_iters, min_support=200,
-                            max_planes=args.pyransac_max_planes, time_cap=args.pyransac_time_cap)
-            q = evaluate(gt_cls, gt_inst, od["labels"])
-            lines.append(row(f"Open3D segment_plane loop ({args.open3d_iters} it/plane)", q,
-                             normals=None, prim=od["ransac_s"], dbscan=None, n_shapes=od["n_shapes"]))
-            split, t_split = split_by_dbscan(xyz, od["labels"], eps)
-            q2 = evaluate(gt_cls, gt_inst, split)
-            lines.append(row("Open3D + our DBSCAN split", q2, normals=None,
-                             prim=od["ransac_s"], dbscan=t_split, n_shapes=od["n_shapes"]))
-            notes.append(f"Open3D: {od['n_shapes']} planes, stop: {od['stop']}")
-            summary["open3d"] = dict(ransac_s=od["ransac_s"], recall=q["recall"], recall_split=q2["recall"])
-            print(f"  Open3D done: {od['ransac_s']:.1f} s", flush=True)
+            pr = run(xyz, thresh=0.03, iters=iters, min_support=200, max_planes=args.pyransac_max_planes,
+                     time_cap=args.pyransac_time_cap)
         except ImportError as exc:
-            notes.append(f"Open3D not run: {exc} (pip install open3d; it needs Debian's libusb-1.0-0)")
+            notes.append(f"{name} not run: {exc} (pip install -e '.[bench]'; Open3D also needs "
+                         "Debian's libusb-1.0-0)")
+            continue
         except Exception as exc:  # noqa: BLE001
-            notes.append(f"Open3D FAILED: {type(exc).__name__}: {exc}")
+            notes.append(f"{name} FAILED: {type(exc).__name__}: {exc}")
             traceback.print_exc()
+            continue
+        q = evaluate(gt_cls, gt_inst, pr["labels"])
+        lines.append(row(label, q, normals=None, prim=pr["ransac_s"], dbscan=None, n_shapes=pr["n_shapes"]))
+        split, t_split = split_by_dbscan(xyz, pr["labels"], eps)
+        q2 = evaluate(gt_cls, gt_inst, split)
+        lines.append(row(f"{name} + our DBSCAN split", q2, normals=None, prim=pr["ransac_s"], dbscan=t_split,
+                         n_shapes=pr["n_shapes"]))
+        notes.append(f"{name}: {pr['n_shapes']} planes, stop: {pr['stop']}")
+        summary[key] = dict(ransac_s=pr["ransac_s"], recall=q["recall"], recall_split=q2["recall"])
+        print(f"  {name} done: {pr['ransac_s']:.1f} s", flush=True)
 
     n_gt = summary.get("n_gt", {})
     print(f"\nGround-truth instances (>= {MIN_GT_POINTS} points): {n_gt}\n")
