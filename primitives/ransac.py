@@ -121,6 +121,7 @@ LEVEL_MIX = 0.9  # x of §4.3.1
 # 2.5-3x slower (docs/benchmarks.md, "Coarse segmentation", 2026-11-25).
 CHUNK_ELEMENTS = 1 << 16  # candidate x point elements per scoring block
 MIN_BLOCK_CANDIDATES = 32  # candidates per block at least (keeps the matrix products efficient)
+CACHED_SUBSET = 1 << 17  # subsets up to this many points are gathered once per extraction
 POINT_CHUNK = 1 << 14  # points per block when one candidate meets all live points
 SPARSE_FACTOR = 4  # bitmaps with more cells than 4x the points are labelled sparsely
 SCORE_TOLERANCE = 0.05  # candidates within 5 % of the best are not told apart
@@ -373,8 +374,8 @@ class _Search:
         self.npx = np.einsum("ij,ij->i", N, P)
         # Contiguous copies of the live points (compacted after each extraction).
         self.live = np.arange(m)
-        self.C = point_columns(P, N, self.pp, self.npx)  # all points, as columns
-        self.Cl = self.C  # the live points (compacted after each extraction)
+        self.Cl = point_columns(P, N, self.pp, self.npx)  # live points as columns (compacted
+        # after each extraction; self.live is ascending, so a point's row is a searchsorted)
         self.k = max(MINIMAL_SET_SIZE[k] for k in kinds)
         # Octree as one Morton order: every cell of every level is a contiguous run.
         lo = P.min(axis=0)
@@ -415,11 +416,16 @@ class _Search:
         self.n_at_subsets = self.n_alive
 
     def _subset_points(self, subset: int) -> PointColumns:
-        """Live points of ``subset`` as columns, gathered once per extraction."""
+        """Live points of ``subset`` as columns. Subsets of up to CACHED_SUBSET points (the
+        ones scored most often) are gathered once per extraction; larger ones each time, so
+        the cache stays small (a copy of every subset would add 64 bytes per point to the
+        densest tile's peak)."""
         got = self._gathered.get(subset)
         if got is None:
             idx = self.subsets[subset]
-            got = self._gathered[subset] = self.C.take(idx[self.alive[idx]])
+            got = self.Cl.take(np.searchsorted(self.live, idx[self.alive[idx]]))
+            if len(got) <= CACHED_SUBSET:
+                self._gathered[subset] = got
         return got
 
     def _count(self, kind_id: npt.NDArray[np.int64], params: F64, subset: int) -> tuple[F64, int]:
