@@ -197,7 +197,7 @@ def run_ours(xyz: np.ndarray, settings: str = "kernel") -> dict:
                 stop=res.stop_reason)
 
 
-def run_tile_kernel(xyz: np.ndarray, eps: float) -> dict:
+def run_tile_kernel(xyz: np.ndarray, eps: float, seed: int = 0) -> dict:
     """What ``hollowtree coarse`` runs on one tile (``pipeline.coarse._segment_points``)
     with the stage's defaults: the three steps above plus free segments and the sparse
     second pass. Timed as a whole."""
@@ -206,7 +206,7 @@ def run_tile_kernel(xyz: np.ndarray, eps: float) -> dict:
 
     params = CoarseParams(ransac=RansacParams(min_support=1000, cluster_epsilon=max(0.15, 2.0 * eps / 3.0)))
     t0 = time.perf_counter()
-    seg, fits, _ = _segment_points(xyz, params, eps, np.random.default_rng(0))
+    seg, fits, _ = _segment_points(xyz, params, eps, np.random.default_rng(seed))
     return dict(total_s=time.perf_counter() - t0, segments=np.where(seg > 0, seg, -1), n_segments=len(fits))
 
 
@@ -502,7 +502,45 @@ def bench_site(site: str, args: argparse.Namespace, tmp: Path) -> dict:
               f"{o['total_s']:.1f} / {c['normals_s'] + c['ransac_s']:.1f} = **{ratio:.2f}**; "
               f"recall ours {o['recall']:.2f} vs CGAL {c['recall']:.2f} "
               f"(target: ratio <= 1.0 at equal or better recall)", flush=True)
+    if args.repeats > 1 and not args.no_cgal and not args.no_tuned:
+        repeat_tile_kernel_vs_cgal_tuned(xyz, gt_cls, gt_inst, eps, args, tmp, summary)
     return summary
+
+
+def repeat_tile_kernel_vs_cgal_tuned(xyz: np.ndarray, gt_cls: np.ndarray, gt_inst: np.ndarray, eps: float,
+                                     args: argparse.Namespace, tmp: Path, summary: dict) -> None:
+    """Both sides are random (ours by its seed, CGAL unseeded): the stage's tile kernel
+    with seeds 0..N-1 and CGAL tuned (normals + RANSAC) N times, means side by side."""
+    tuned = dict(CGAL_TUNED)
+    tuned["cluster_epsilon"] = max(0.15, float(eps))
+    rows = {"ours, the stage's tile kernel": [], "CGAL tuned": []}
+    for seed in range(args.repeats):
+        full = run_tile_kernel(xyz, eps, seed)
+        rows["ours, the stage's tile kernel"].append((full["total_s"], evaluate(gt_cls, gt_inst, full["segments"])))
+        res = run_cgal(xyz, [tuned], tmp, args.cgal_normals, 16, args.cgal_timeout)
+        run = res.get("runs", [{}])[0] if "error" not in res else {"error": res["error"]}
+        if "error" in run:
+            print(f"  repeat {seed}: CGAL tuned failed: {run['error']}", flush=True)
+            continue
+        rows["CGAL tuned"].append((res["normals_s"] + run["ransac_s"], evaluate(gt_cls, gt_inst, run["labels"])))
+    print(f"\nRepeated {args.repeats} times (ours: seeds 0..{args.repeats - 1}; CGAL tuned: unseeded runs):\n")
+    print("| method | runs | total s, mean | recall, mean | recall per run | round recall per run |")
+    print("| --- | ---: | ---: | ---: | --- | --- |")
+    means = {}
+    for name, got in rows.items():
+        if not got:
+            continue
+        s = float(np.mean([g[0] for g in got]))
+        r = float(np.mean([g[1]["recall"] for g in got]))
+        means[name] = (s, r)
+        per_run = " ".join(f"{g[1]['recall']:.2f}" for g in got)
+        per_round = " ".join(f"{g[1]['recall_round']:.2f}" for g in got)
+        print(f"| {name} | {len(got)} | {s:.2f} | **{r:.3f}** | {per_run} | {per_round} |")
+    if len(means) == 2:
+        (so, ro), (sc, rc) = means.values()
+        summary["repeats"] = {"ours_s": so, "ours_recall": ro, "cgal_tuned_s": sc, "cgal_tuned_recall": rc}
+        print(f"\nmean ratio (ours tile kernel) / (CGAL tuned normals + RANSAC) = {so:.2f} / {sc:.2f} = "
+              f"**{so / sc:.2f}** at mean recall {ro:.3f} vs {rc:.3f}", flush=True)
 
 
 def main() -> None:
@@ -519,6 +557,8 @@ def main() -> None:
     ap.add_argument("--cgal-timeout", type=float, default=600.0)
     ap.add_argument("--no-pyransac", action="store_true")
     ap.add_argument("--no-open3d", action="store_true")
+    ap.add_argument("--repeats", type=int, default=1,
+                    help="also run the tile kernel (seeds 0..N-1) and CGAL tuned N times each, means side by side")
     ap.add_argument("--open3d-iters", type=int, default=1000, help="RANSAC iterations per Open3D plane")
     ap.add_argument("--pyransac-iters", type=int, default=200)
     ap.add_argument("--pyransac-max-planes", type=int, default=30)
