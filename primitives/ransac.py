@@ -121,7 +121,6 @@ LEVEL_MIX = 0.9  # x of §4.3.1
 # 2.5-3x slower (docs/benchmarks.md, "Coarse segmentation", 2026-11-25).
 CHUNK_ELEMENTS = 1 << 16  # candidate x point elements per scoring block
 MIN_BLOCK_CANDIDATES = 32  # candidates per block at least (keeps the matrix products efficient)
-CACHED_SUBSET = 1 << 17  # subsets up to this many points are gathered once per extraction
 POINT_CHUNK = 1 << 14  # points per block when one candidate meets all live points
 SPARSE_FACTOR = 4  # bitmaps with more cells than 4x the points are labelled sparsely
 SCORE_TOLERANCE = 0.05  # candidates within 5 % of the best are not told apart
@@ -372,10 +371,6 @@ class _Search:
         self.n_alive = m
         self.pp = np.einsum("ij,ij->i", P, P)
         self.npx = np.einsum("ij,ij->i", N, P)
-        # Contiguous copies of the live points (compacted after each extraction).
-        self.live = np.arange(m)
-        self.Cl = point_columns(P, N, self.pp, self.npx)  # live points as columns (compacted
-        # after each extraction; self.live is ascending, so a point's row is a searchsorted)
         self.k = max(MINIMAL_SET_SIZE[k] for k in kinds)
         # Octree as one Morton order: every cell of every level is a contiguous run.
         lo = P.min(axis=0)
@@ -406,27 +401,32 @@ class _Search:
 
     # --------------------------------------------------------------- subsets
     def _new_subsets(self) -> None:
-        live = np.flatnonzero(self.alive)
-        perm = self.rng.permutation(live)
+        """Split the live points into random subsets and lay them out subset by subset.
+
+        ``self.live`` lists the live points in that layout and ``self.Cl`` holds them as
+        contiguous columns, so subset ``j`` is the slice ``sub_bounds[j]:sub_bounds[j + 1]``
+        of the columns: scoring reads it in place. Extractions compact ``live`` and ``Cl``
+        in order, which keeps every subset one slice.
+        """
+        perm = self.rng.permutation(np.flatnonzero(self.alive))
         bounds = [0]
         while bounds[-1] < len(perm):
             bounds.append(min(len(perm), bounds[-1] + max(FIRST_SUBSET, bounds[-1])))
-        self.subsets = [perm[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
-        self._gathered: dict[int, PointColumns] = {}
+        self.sub_bounds = np.asarray(bounds, dtype=np.int64)
+        self.live = perm
+        P, N = self.P, self.N
+        self.Cl = PointColumns(*(np.ascontiguousarray(c[perm]) for c in (P[:, 0], P[:, 1], P[:, 2], N[:, 0],
+                                                                         N[:, 1], N[:, 2], self.pp, self.npx)))
         self.n_at_subsets = self.n_alive
 
+    @property
+    def n_subsets(self) -> int:
+        return len(self.sub_bounds) - 1
+
     def _subset_points(self, subset: int) -> PointColumns:
-        """Live points of ``subset`` as columns. Subsets of up to CACHED_SUBSET points (the
-        ones scored most often) are gathered once per extraction; larger ones each time, so
-        the cache stays small (a copy of every subset would add 64 bytes per point to the
-        densest tile's peak)."""
-        got = self._gathered.get(subset)
-        if got is None:
-            idx = self.subsets[subset]
-            got = self.Cl.take(np.searchsorted(self.live, idx[self.alive[idx]]))
-            if len(got) <= CACHED_SUBSET:
-                self._gathered[subset] = got
-        return got
+        """Live points of ``subset`` as columns: views into ``self.Cl``, no copy."""
+        a, b = int(self.sub_bounds[subset]), int(self.sub_bounds[subset + 1])
+        return PointColumns(*(c[a:b] for c in self.Cl.columns()))
 
     def _count(self, kind_id: npt.NDArray[np.int64], params: F64, subset: int) -> tuple[F64, int]:
         cols = self._subset_points(subset)
@@ -547,7 +547,7 @@ class _Search:
     # ---------------------------------------------------------- selection
     def pick(self) -> int:
         """Index of the best candidate after refining every overlapping interval."""
-        n_sub = len(self.subsets)
+        n_sub = self.n_subsets
         while True:
             est, low, upper = self.bounds()
             b = int(np.argmax(est))
@@ -572,7 +572,7 @@ class _Search:
                 ok = compatible(kind, params[None], P, N, epsilon=self.eps, cos_alpha=self.cos_a,
                                 sq_norm=pp, normal_dot=npx)
                 hits.append(np.flatnonzero(ok[0]) + a)
-        idx = self.live[np.concatenate(hits)] if hits else np.zeros(0, dtype=np.int64)
+        idx = np.sort(self.live[np.concatenate(hits)]) if hits else np.zeros(0, dtype=np.int64)
         if len(idx) < 2:
             return idx
         return idx[_largest_component(surface_coordinates(kind, params, self.P[idx]), self.ce)]
@@ -582,7 +582,7 @@ class _Search:
         before = float(self.bounds()[0][b])
         self.x[b] = len(self.inliers(self.kinds[self.kind_id[b]], self.params[b]))
         self.s[b] = self.n_alive
-        self.n_eval[b] = len(self.subsets)
+        self.n_eval[b] = self.n_subsets
         self.exact[b] = True
         ratio = self.x[b] / max(before, 1.0)
         if ratio < 1.0 - SCORE_TOLERANCE:
@@ -636,7 +636,6 @@ class _Search:
         if len(idx) < self.min_support:
             return None
         self.alive[idx] = False
-        self._gathered.clear()
         self.hits_ok[:] = False
         self.n_alive -= len(idx)
         keep = self.alive[self.order]
@@ -644,6 +643,7 @@ class _Search:
         keep = self.alive[self.live]
         self.live = self.live[keep]
         self.Cl = self.Cl.take(keep)
+        self.sub_bounds = np.concatenate(([0], np.cumsum(keep)))[self.sub_bounds]
         self.level_score *= 0.5
         self.templates = []
         if self.n_alive < 0.5 * self.n_at_subsets:
