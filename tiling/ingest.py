@@ -29,8 +29,9 @@ import numpy as np
 import numpy.typing as npt
 
 from tiling.errors import ConfigError, CorruptInputError
-from tiling.grid import TileGrid, morton_order
-from tiling.readers import SourceInfo, probe, read_blocks
+from tiling.grid import TileGrid
+from tiling.kernels import morton_index_order, quantise, route_groups, split_rows
+from tiling.readers import PointBlock, SourceInfo, probe, read_blocks
 from tiling.store import RunStore, StoreError, check_writable
 
 __all__ = [
@@ -58,6 +59,8 @@ FLUSH_ROWS = 1_000_000
 FLOAT_SOURCE_SCALE = 0.0001
 _INT32_MAX = 2**31 - 1
 _END = np.iinfo(np.int64).max  # sentinel key closing a fragment's group table
+#: Layout of the map phase's fragments; map records of another layout are redone.
+FRAGMENT_FORMAT = 2
 
 #: ``runner(fn, args_list, desc) -> results`` runs ``fn(*args)`` for every entry (as Dask
 #: tasks or in process) and returns the results in order.
@@ -323,19 +326,14 @@ def plan_ingest(inputs: Sequence[str | Path], params: IngestParams) -> IngestPla
     return IngestPlan(**{**plan.__dict__, "params_hash": digest})
 
 
-def _row_dtype(fields: dict[str, list[Any]]) -> np.dtype:
-    spec: list[Any] = [("xyz", "<i4", (3,)), ("index", "<u8"), ("core", "?"), ("core_tile", "<i8")]
+def _row_dtype(fields: dict[str, list[Any]], voxel: bool) -> np.dtype:
+    """One fragment row: a point's store fields, plus its core tile where voxels need it."""
+    spec: list[Any] = [("xyz", "<i4", (3,)), ("index", "<u8"), ("core", "?")]
+    if voxel:
+        spec.append(("core_tile", "<i8"))
     for name, (dt, shape) in fields.items():
         spec.append((name, dt, tuple(shape)) if shape else (name, dt))
     return np.dtype(spec)
-
-
-def _subcell_key(xyz_world: npt.NDArray[np.float64], offset: npt.NDArray[np.float64], width: float) -> npt.NDArray[np.int64]:
-    """Global key of the x-y sub-cell (side ``width``) of every point; ascending keys run
-    row by row (y, then x), so a tile's sub-cells come in a fixed order."""
-    gx = np.floor((xyz_world[:, 0] - offset[0]) / width).astype(np.int64) + (1 << 30)
-    gy = np.floor((xyz_world[:, 1] - offset[1]) / width).astype(np.int64) + (1 << 30)
-    return (gy << 31) | gx
 
 
 def subcell_width(tile_size: float, voxel: float | None) -> float:
@@ -359,63 +357,60 @@ def fragment_key(map_id: int, tile: int) -> str:
 def map_chunk(url: str, unit: MapUnit, plan_attrs: dict[str, Any]) -> dict[str, int]:
     """Map task: route records of ``unit`` to tiles; write fragments, then the record.
 
-    Returns ``{tile: number of points}`` for the tiles this unit wrote.
+    Every fragment holds one tile's rows sorted by x-y sub-cell (then by record), with a
+    table of its sub-cells' first rows. Routing, ordering and row building are compiled
+    kernels (tiling/kernels.py). Returns ``{tile: number of points}`` for the tiles this
+    unit wrote.
     """
     store = RunStore.open(url, mode="a")
     grid = TileGrid.from_dict(plan_attrs["grid"])
     scale = np.asarray(plan_attrs["coords"]["scale"])
     offset = np.asarray(plan_attrs["coords"]["offset"])
     fields = plan_attrs["fields"]
+    voxel = plan_attrs["ingest"]["params"].get("voxel")
     wanted = np.zeros(grid.n_tiles, dtype=bool)
     wanted[plan_attrs["ingest"]["tiles"]] = True
-    width = subcell_width(grid.tile_size, plan_attrs["ingest"]["params"].get("voxel"))
-    dtype = _row_dtype(fields)
-    parts: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
-    n_dropped = 0
-    for block in read_blocks(unit.path, chunk_size=unit.stop - unit.start, start=unit.start, stop=unit.stop):
-        n_dropped += block.n_dropped
-        if not len(block.xyz):
-            continue
-        point, tile, is_core = grid.route(block.xyz, outside="flag", sort=False)
-        if np.count_nonzero(is_core) != len(block.xyz):  # each point has one core pair
+    width = subcell_width(grid.tile_size, voxel)
+    dtype = _row_dtype(fields, bool(voxel))
+    blocks = list(read_blocks(unit.path, chunk_size=unit.stop - unit.start, start=unit.start, stop=unit.stop))
+    n_dropped = sum(b.n_dropped for b in blocks)
+    block = blocks[0] if len(blocks) == 1 else PointBlock.concat(blocks)
+    counts: dict[str, int] = {}
+    if len(block):
+        ex, ey = grid.edges()
+        core, point, is_core, g_tile, g_key, g_start = route_groups(
+            block.xyz[:, 0], block.xyz[:, 1], ex, ey, tile_size=grid.tile_size, buffer=grid.buffer,
+            sub_offset=(float(offset[0]), float(offset[1])), sub_width=width, wanted=wanted,
+        )
+        if np.any(core < 0):  # each point must have one core tile
             raise CorruptInputError(
                 f"{unit.path}: points outside the bounds its header gives (records {unit.start}-{unit.stop})"
             )
-        core_of_point = np.empty(len(block.xyz), dtype=np.int64)
-        core_of_point[point[is_core]] = tile[is_core]
-        sub_of_point = _subcell_key(block.xyz, offset, width)
-        keep = wanted[tile]
-        point, tile, is_core = point[keep], tile[keep], is_core[keep]
-        if not len(point):  # nothing of this block lies in the tiles asked for
-            continue
-        sub = sub_of_point[point]
-        order = np.lexsort((sub, tile))
-        point, tile, is_core, sub = point[order], tile[order], is_core[order], sub[order]
-        rows = np.empty(len(point), dtype=dtype)
-        quantised = np.round((block.xyz - offset) / scale).astype(np.int32)
-        rows["xyz"] = np.take(quantised, point, axis=0)
-        rows["index"] = np.take(block.index, point) + np.uint64(unit.base)
-        rows["core"] = is_core
-        rows["core_tile"] = np.take(core_of_point, point)
+        # rows in record order (sequential field copies), then whole rows in pair order:
+        # measured faster than gathering every field at the pairs' scattered rows
+        src = np.empty(len(block), dtype=dtype)
+        src["xyz"] = quantise(block.xyz, offset, scale)
+        src["index"] = block.index + np.uint64(unit.base)
+        if voxel:
+            src["core_tile"] = core
         for name in fields:
-            src = block.extra.get(name[6:]) if name.startswith("extra.") else getattr(block, name)
-            rows[name] = np.take(np.asarray(src), point, axis=0) if src is not None else 0
-        cuts = np.flatnonzero(np.r_[True, tile[1:] != tile[:-1], True])
-        for a, b in zip(cuts[:-1], cuts[1:], strict=True):
-            parts.setdefault(int(tile[a]), []).append((rows[a:b], sub[a:b]))
-    counts: dict[str, int] = {}
-    for t, pieces in parts.items():
-        rows = np.concatenate([p[0] for p in pieces])
-        sub = np.concatenate([p[1] for p in pieces])
-        if len(pieces) > 1:  # several blocks: restore the sub-cell order
-            order = np.argsort(sub, kind="stable")
-            rows, sub = rows[order], sub[order]
-        starts = np.flatnonzero(np.r_[True, sub[1:] != sub[:-1]])
-        groups = np.stack([np.r_[sub[starts], _END], np.r_[starts, len(rows)]], axis=1)
-        store.write_fragment(fragment_key(unit.map_id, t), rows, groups)
-        counts[str(t)] = len(rows)
+            values = block.extra.get(name[6:]) if name.startswith("extra.") else getattr(block, name)
+            src[name] = 0 if values is None else values
+        rows = src.take(point)
+        del src
+        rows["core"] = is_core
+        firsts = np.flatnonzero(np.r_[True, g_tile[1:] != g_tile[:-1]]) if len(g_tile) else np.zeros(0, np.int64)
+        for i, f in enumerate(firsts.tolist()):
+            last = int(firsts[i + 1]) if i + 1 < len(firsts) else len(g_tile)
+            a = int(g_start[f])
+            b = int(g_start[last]) if last < len(g_tile) else len(point)
+            groups = np.stack([np.r_[g_key[f:last], _END], np.r_[g_start[f:last] - a, b - a]], axis=1)
+            t = int(g_tile[f])
+            store.write_fragment(fragment_key(unit.map_id, t), rows[a:b], groups)
+            counts[str(t)] = b - a
     store.record(MAP_STAGE, str(unit.map_id), {
         "params_hash": plan_attrs["ingest"]["params_hash"], "tiles": counts, "n_dropped": n_dropped,
+        "fragment": FRAGMENT_FORMAT,
     })
     return counts
 
@@ -448,6 +443,8 @@ def reduce_tile(url: str, tile: int, keys: Sequence[str], plan_attrs: dict[str, 
     scale = np.asarray(plan_attrs["coords"]["scale"])
     grid = TileGrid.from_dict(plan_attrs["grid"])
     params = plan_attrs["ingest"]["params"]
+    voxel = params.get("voxel")
+    dtype = _row_dtype(fields, bool(voxel))
     # Each fragment is sorted by sub-cell. Consecutive sub-cells are gathered into batches
     # of about FLUSH_ROWS rows (one read per fragment and batch), so memory follows the
     # batch (or the densest single sub-cell), never the tile.
@@ -470,41 +467,49 @@ def reduce_tile(url: str, tile: int, keys: Sequence[str], plan_attrs: dict[str, 
     offset = np.asarray(plan_attrs["coords"]["offset"])
     cell = max(1.0, round(0.01 / float(scale.min())))  # 1 cm Morton cells
     names = ["xyz", "index", "core", *fields]
-    writer = store.unit_writer(f"tiles/{tile}")
+    # Without voxels the tile's length is known: its arrays are made once at full size.
+    writer = store.unit_writer(f"tiles/{tile}", n_rows=None if voxel else sum(totals.values()))
     n_points = n_core = 0
     for lo, hi in batches:
-        pieces = []
+        spans = []
         for k, groups in tables.items():
             a = int(np.searchsorted(groups[:, 0], lo, side="left"))
             b = int(np.searchsorted(groups[:, 0], hi, side="right"))
             if a < b:  # the sentinel keeps b < len(groups)
-                pieces.append(store.read_fragment_rows(k, int(groups[a, 1]), int(groups[b, 1])))
-        rows = np.concatenate(pieces)
-        # Order by original index first, so the result never depends on fragment order;
-        # the permutations are composed and every field is gathered once, contiguously.
-        perm = np.argsort(rows["index"])  # unique within a tile: any sort is stable
+                spans.append((k, int(groups[a, 1]), int(groups[b, 1])))
+        rows = np.empty(sum(b - a for _, a, b in spans), dtype=dtype)
+        at = 0
+        for k, a, b in spans:
+            store.read_fragment_rows(k, a, b, out=rows[at:at + b - a])
+            at += b - a
+        index = np.ascontiguousarray(rows["index"])
         extra: dict[str, np.ndarray] = {}
-        if params.get("voxel"):
-            xyz_i, idx_i = np.take(rows["xyz"], perm, axis=0), np.take(rows["index"], perm)
+        if voxel:
+            perm = np.argsort(index)  # unique within a tile: any sort is stable
+            xyz_i, idx_i = np.take(rows["xyz"], perm, axis=0), np.take(index, perm)
             keep, rep = _voxel_representatives(
-                xyz_i, idx_i, np.take(rows["core_tile"], perm), scale=scale, voxel=params["voxel"]
+                xyz_i, idx_i, np.take(rows["core_tile"], perm), scale=scale, voxel=voxel
             )
             dropped = np.take(rows["core"], perm) & ~keep
             extra["voxel_dropped"] = idx_i[dropped]
             extra["voxel_representative"] = idx_i[rep[dropped]]
             perm = perm[keep]
-        xyz = np.take(rows["xyz"], perm, axis=0)
+            xyz, index = np.take(rows["xyz"], perm, axis=0), np.take(index, perm)
+        else:
+            perm = np.arange(len(rows))
+            xyz = np.ascontiguousarray(rows["xyz"])
         origin = np.array([(x0 - offset[0]) / scale[0], (y0 - offset[1]) / scale[1],
-                           float(xyz[:, 2].min())])
-        perm = perm[morton_order(xyz, origin=origin, cell=cell)]
-        out = {n: np.take(rows[n], perm, axis=0) for n in names}  # take: 3x faster than [perm] here
+                           float(xyz[:, 2].min()) if len(xyz) else 0.0])
+        # Morton order, equal codes by original index: independent of fragment order
+        perm = perm[morton_index_order(xyz, index, origin=origin, cell=cell)]
+        out = split_rows(rows, names, perm)
         writer.append({**out, **extra})
         n_points += len(perm)
         n_core += int(np.count_nonzero(out["core"]))
-    empty = np.zeros(0, dtype=_row_dtype(fields))
+    empty = np.zeros(0, dtype=dtype)
     writer.close({**{n: empty[n] for n in names},
                   **({"voxel_dropped": np.zeros(0, np.uint64), "voxel_representative": np.zeros(0, np.uint64)}
-                     if params.get("voxel") else {})})
+                     if voxel else {})})
     store.record(STAGE, str(tile), {
         "params_hash": plan_attrs["ingest"]["params_hash"],
         "n_points": n_points,
@@ -605,7 +610,8 @@ def ingest(
     attrs = store.attrs
     h = plan.params_hash
 
-    done_maps = {k: v for k, v in store.records(MAP_STAGE).items() if v.get("params_hash") == h}
+    done_maps = {k: v for k, v in store.records(MAP_STAGE).items()
+                 if v.get("params_hash") == h and v.get("fragment") == FRAGMENT_FORMAT}
     done_tiles = {k for k, v in store.records(STAGE).items() if v.get("params_hash") == h}
     todo_units = [u for u in plan.units if str(u.map_id) not in done_maps]
     # Map units are needed only while some tile is not recorded yet.

@@ -172,12 +172,16 @@ class RunStore:
             if values.size:
                 arr[...] = values
 
-    def unit_writer(self, group: str) -> _UnitWriter:
-        """An appending writer for group path ``group`` (its old arrays are removed)."""
+    def unit_writer(self, group: str, *, n_rows: int | None = None) -> _UnitWriter:
+        """An appending writer for group path ``group`` (its old arrays are removed).
+
+        ``n_rows``: the final length of every array when known; they are then created at
+        that length once instead of growing with each flush.
+        """
         g = self._require_group(group)
         for name in list(g.array_keys()):
             del g[name]
-        return _UnitWriter(g)
+        return _UnitWriter(g, n_rows=n_rows)
 
     def read_unit(self, group: str, names: Iterable[str] | None = None) -> dict[str, np.ndarray]:
         """Read arrays of group path ``group`` (all, or ``names``)."""
@@ -257,8 +261,13 @@ class RunStore:
         with fs.open(f"{base}/{key}.idx.npy", "rb") as f:
             return np.load(io.BytesIO(f.read()), allow_pickle=False)
 
-    def read_fragment_rows(self, key: str, start: int, stop: int) -> npt.NDArray[np.void]:
-        """Rows ``[start, stop)`` of a fragment, reading only those bytes."""
+    def read_fragment_rows(self, key: str, start: int, stop: int,
+                           out: npt.NDArray[np.void] | None = None) -> npt.NDArray[np.void]:
+        """Rows ``[start, stop)`` of a fragment, reading only those bytes.
+
+        With ``out`` (a contiguous array of the fragment's dtype and ``stop - start``
+        rows), the bytes are read straight into it and ``out`` is returned.
+        """
         fs, base = self._fs()
         with fs.open(f"{base}/{key}.npy", "rb") as f:
             version = np.lib.format.read_magic(f)
@@ -267,11 +276,26 @@ class RunStore:
             else:
                 shape, _, dtype = np.lib.format.read_array_header_2_0(f)
             stop = min(stop, shape[0])
+            if out is not None and (out.dtype != dtype or len(out) != max(stop - start, 0)):
+                raise StoreError(f"fragment {key}: rows {start}-{stop} of {dtype} do not fit "
+                                 f"{len(out)} rows of {out.dtype}")
             if stop <= start:
-                return np.zeros(0, dtype=dtype)
+                return np.zeros(0, dtype=dtype) if out is None else out
             f.seek(f.tell() + start * dtype.itemsize)
-            raw = f.read((stop - start) * dtype.itemsize)
-        return np.frombuffer(raw, dtype=dtype).copy()
+            if out is None:
+                out = np.empty(stop - start, dtype=dtype)
+            view = memoryview(out.view(np.uint8).reshape(-1))
+            got = 0
+            while got < len(view):
+                n = f.readinto(view[got:]) if hasattr(f, "readinto") else None
+                if n is None:  # a file object without readinto
+                    data = f.read(len(view) - got)
+                    n = len(data)
+                    view[got:got + n] = data
+                if not n:
+                    raise StoreError(f"fragment {key} is shorter than its header says")
+                got += n
+        return out
 
     def delete_fragments(self, keys: Iterable[str] | None = None) -> None:
         """Delete the given fragments (all when ``keys`` is None)."""
@@ -341,8 +365,9 @@ class _UnitWriter:
 
     FLUSH_CHUNKS = 4
 
-    def __init__(self, group: zarr.Group) -> None:
+    def __init__(self, group: zarr.Group, *, n_rows: int | None = None) -> None:
         self._group = group
+        self._n_rows = n_rows
         self._arrays: dict[str, zarr.Array] = {}
         self._pending: dict[str, list[npt.NDArray[Any]]] = {}
         self._n_pending: dict[str, int] = {}
@@ -350,7 +375,7 @@ class _UnitWriter:
 
     def _create(self, name: str, values: npt.NDArray[Any]) -> zarr.Array:
         arr = self._group.create_array(
-            name, shape=(0, *values.shape[1:]), dtype=values.dtype,
+            name, shape=(self._n_rows or 0, *values.shape[1:]), dtype=values.dtype,
             chunks=(CHUNK_POINTS, *values.shape[1:]), compressors=_COMPRESSOR, overwrite=True,
         )
         self._arrays[name] = arr
@@ -365,7 +390,10 @@ class _UnitWriter:
         pieces = self._pending[name]
         values = pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
         arr, start = self._arrays[name], self._n_written[name]
-        arr.resize((start + take, *values.shape[1:]))
+        if self._n_rows is None:
+            arr.resize((start + take, *values.shape[1:]))
+        elif start + take > self._n_rows:
+            raise StoreError(f"{self._group.path}/{name}: more than the {self._n_rows} rows announced")
         arr[start:start + take] = values[:take]
         rest = values[take:]
         self._pending[name] = [rest] if len(rest) else []
@@ -388,6 +416,9 @@ class _UnitWriter:
         from ``templates``."""
         for name in list(self._arrays):
             self._flush(name, final=True)
+            if self._n_rows is not None and self._n_written[name] != self._n_rows:
+                raise StoreError(f"{self._group.path}/{name}: {self._n_written[name]} rows written, "
+                                 f"{self._n_rows} announced")
         for name, values in templates.items():
             if name not in self._arrays:
                 self._create(name, np.asarray(values))
