@@ -26,6 +26,7 @@ already holds them.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numba
@@ -41,9 +42,12 @@ FUSED_KINDS = {"plane": 0, "sphere": 1, "cylinder": 2, "cone": 3}
 
 _TINY = 1e-12  # as primitives.shapes
 _BLOCK = 2048  # points per block (6 columns + 2 scalars x 8 bytes x 2048 = 128 KB)
-#: Candidate x point pairs from which a call runs on all of numba's threads (about 0.2 ms
-#: of work on one core; a parallel launch costs some 10 us).
-PARALLEL_PAIRS = 1 << 15
+#: Candidate x point pairs from which a call runs on all of numba's threads (some 30-60 us
+#: of work on one core; a parallel launch costs about 10 us).
+PARALLEL_PAIRS = 1 << 16
+#: Threads a call may use: OMP_NUM_THREADS where set (Dask's worker processes set it to 1,
+#: so tiles running side by side in several workers do not oversubscribe the cores).
+_MAX_LANES = max(1, int(os.environ.get("OMP_NUM_THREADS") or 1 << 16))
 
 
 @dataclass(frozen=True)
@@ -126,7 +130,7 @@ def _run_kernel(kind: str, params: F64, pts: PointColumns, epsilon: float, cos_a
     """The threaded kernel where the work pays for starting the threads, else the serial one."""
     args = (FUSED_KINDS[kind], np.ascontiguousarray(params, dtype=np.float64), pts.x, pts.y, pts.z, pts.nx,
             pts.ny, pts.nz, pts.pp, pts.npx, float(epsilon), float(cos_alpha), counts, mask, write_mask)
-    lanes = numba.get_num_threads()
+    lanes = min(numba.get_num_threads(), _MAX_LANES)
     if len(params) * len(pts) >= PARALLEL_PAIRS and lanes > 1:
         _kernel_parallel(*args, lanes)
     else:
