@@ -26,7 +26,6 @@ already holds them.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 
 import numba
@@ -42,12 +41,6 @@ FUSED_KINDS = {"plane": 0, "sphere": 1, "cylinder": 2, "cone": 3}
 
 _TINY = 1e-12  # as primitives.shapes
 _BLOCK = 2048  # points per block (6 columns + 2 scalars x 8 bytes x 2048 = 128 KB)
-#: Candidate x point pairs from which a call runs on all of numba's threads (some 30-60 us
-#: of work on one core; a parallel launch costs about 10 us).
-PARALLEL_PAIRS = 1 << 16
-#: Threads a call may use: OMP_NUM_THREADS where set (Dask's worker processes set it to 1,
-#: so tiles running side by side in several workers do not oversubscribe the cores).
-_MAX_LANES = max(1, int(os.environ.get("OMP_NUM_THREADS") or 1 << 16))
 
 
 @dataclass(frozen=True)
@@ -127,14 +120,8 @@ def compatible_mask(kind: str, params: F64, pts: PointColumns, *, epsilon: float
 
 def _run_kernel(kind: str, params: F64, pts: PointColumns, epsilon: float, cos_alpha: float,
                 counts: npt.NDArray[np.int64], mask: npt.NDArray[np.bool_], write_mask: bool) -> None:
-    """The threaded kernel where the work pays for starting the threads, else the serial one."""
-    args = (FUSED_KINDS[kind], np.ascontiguousarray(params, dtype=np.float64), pts.x, pts.y, pts.z, pts.nx,
+    _kernel(FUSED_KINDS[kind], np.ascontiguousarray(params, dtype=np.float64), pts.x, pts.y, pts.z, pts.nx,
             pts.ny, pts.nz, pts.pp, pts.npx, float(epsilon), float(cos_alpha), counts, mask, write_mask)
-    lanes = min(numba.get_num_threads(), _MAX_LANES)
-    if len(params) * len(pts) >= PARALLEL_PAIRS and lanes > 1:
-        _kernel_parallel(*args, lanes)
-    else:
-        _kernel(*args)
 
 
 def shared_hits(hits: npt.NDArray[np.bool_], mask: npt.NDArray[np.bool_]
@@ -169,13 +156,13 @@ def _shared(hits, mask, own, shared):  # type: ignore[no-untyped-def]  # pragma:
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _score_block(kind, prm, k0, k1, b0, b1, X, Y, Z, NX, NY, NZ, PP, NPX, eps, cos_a, counts, mask, write_mask):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    """Candidates ``k0:k1`` against points ``b0:b1``: counts added to ``counts[k]``."""
+def _score_block(kind, prm, b0, b1, X, Y, Z, NX, NY, NZ, PP, NPX, eps, cos_a, counts, mask, write_mask):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """Every candidate against points ``b0:b1``: counts added to ``counts[k]``."""
     cos2 = cos_a * cos_a
     # Unsigned point indices: with signed ones numba cannot rule out a negative (wrapping)
     # index, and LLVM turns every column read into a gather (5x slower on Zen 4).
     u0, u1 = numba.uint64(b0), numba.uint64(b1)
-    for k in range(k0, k1):
+    for k in range(prm.shape[0]):
         c = 0
         if kind == 0:
             n0, n1, n2, d0 = prm[k, 0], prm[k, 1], prm[k, 2], prm[k, 3]
@@ -238,31 +225,5 @@ def _kernel(kind, prm, X, Y, Z, NX, NY, NZ, PP, NPX, eps, cos_a, counts, mask, w
     m = X.shape[0]
     for b0 in range(0, m, _BLOCK):
         b1 = min(m, b0 + _BLOCK)
-        _score_block(kind, prm, 0, prm.shape[0], b0, b1, X, Y, Z, NX, NY, NZ, PP, NPX, eps, cos_a, counts,
+        _score_block(kind, prm, b0, b1, X, Y, Z, NX, NY, NZ, PP, NPX, eps, cos_a, counts,
                      mask, write_mask)
-
-
-@numba.njit(cache=True, nogil=True, parallel=True)
-def _kernel_parallel(kind, prm, X, Y, Z, NX, NY, NZ, PP, NPX, eps, cos_a, counts, mask, write_mask, lanes):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    """:func:`_kernel` on all threads: tasks are (point block, candidate share) pairs, so
-    that a few candidates on many points and many candidates on few points both split."""
-    m = X.shape[0]
-    n_cand = prm.shape[0]
-    n_blocks = (m + _BLOCK - 1) // _BLOCK
-    shares = 1
-    want = 4 * lanes
-    if n_blocks < want:
-        shares = min(n_cand, (want + n_blocks - 1) // n_blocks)
-    part = np.zeros((lanes, n_cand), dtype=np.int64)  # one row per lane: no shared counter
-    n_tasks = n_blocks * shares
-    for lane in numba.prange(lanes):
-        for t in range(lane, n_tasks, lanes):
-            b = t // shares
-            s = t % shares
-            b0 = b * _BLOCK
-            b1 = min(m, b0 + _BLOCK)
-            _score_block(kind, prm, s * n_cand // shares, (s + 1) * n_cand // shares, b0, b1, X, Y, Z, NX, NY,
-                         NZ, PP, NPX, eps, cos_a, part[lane], mask, write_mask)
-    for t in range(part.shape[0]):
-        for k in range(n_cand):
-            counts[k] += part[t, k]
