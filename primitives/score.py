@@ -18,8 +18,11 @@ Results agree with the reference except where a point sits on a threshold to wit
 rounding (a few units in the last place: the sums are evaluated in another order); the
 tests check that.
 
-Cost (docs/benchmarks.md, "Coarse segmentation"): about 1 ns per candidate x point for a
-plane on one Zen 3 core, 3-10x less than the reference. The first call in a process
+Cost (docs/benchmarks.md, "Coarse segmentation"), one Zen 4 core: 0.45 ns per candidate
+x point for a plane, 0.7 for a sphere, 0.8 for a cylinder, 1.5 for a cone, about 10x
+less than the reference. The point index of the inner loops is unsigned: with a signed
+one numba cannot rule out a negative (wrapping) index and every column read became a
+gather (4.5 ns per plane pair). The first call in a process
 compiles the kernels (a few seconds) unless numba's on-disk cache (next to this file)
 already holds them.
 """
