@@ -60,7 +60,7 @@ FLOAT_SOURCE_SCALE = 0.0001
 _INT32_MAX = 2**31 - 1
 _END = np.iinfo(np.int64).max  # sentinel key closing a fragment's group table
 #: Layout of the map phase's fragments; map records of another layout are redone.
-FRAGMENT_FORMAT = 2
+FRAGMENT_FORMAT = 3
 
 #: ``runner(fn, args_list, desc) -> results`` runs ``fn(*args)`` for every entry (as Dask
 #: tasks or in process) and returns the results in order.

@@ -4,7 +4,7 @@ Layout (``docs/store.md`` is the reference)::
 
     <store>/zarr.json              root attrs: schema_version, sources, grid, coords, ingest
     <store>/tiles/<tile>/          one group per tile: xyz, index, core, ... (whole chunks)
-    <store>/fragments/<key>.npy    map-phase output (.npy + .idx.npy), deleted once its tile is recorded
+    <store>/fragments/<key>.frag   map-phase output (compressed row blocks), deleted once its tile is recorded
     <store>/records/<stage>/<unit> completion records: one group per finished unit
 
 Completion records are written by the task that made the unit, after its data, as one
@@ -15,7 +15,8 @@ only recorded units.
 
 from __future__ import annotations
 
-import io
+import asyncio
+import json
 import logging
 import os
 import time
@@ -26,7 +27,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import zarr
-from zarr.codecs import BloscCodec
+from numcodecs import Blosc
+from zarr.codecs import BloscCodec, BytesCodec
+from zarr.core.buffer import default_buffer_prototype
+from zarr.core.sync import sync
 
 from tiling.errors import ConfigError, InputFileError, PipelineError
 
@@ -39,6 +43,17 @@ SCHEMA_VERSION = 1
 #: Points per chunk along the first axis (about 3 MB of int32 xyz, 2 MB of uint64 index).
 CHUNK_POINTS = 262_144
 _COMPRESSOR = BloscCodec(cname="lz4", clevel=5, shuffle="shuffle")
+
+
+#: Rows per independently compressed block of a map-phase fragment.
+FRAGMENT_BLOCK_ROWS = 65_536
+FRAGMENT_MAGIC = b"HTFRAG1\n"
+
+
+def _fragment_codec(itemsize: int) -> Blosc:
+    """Blosc-lz4 over whole rows (``typesize`` = row size: the shuffle groups each byte
+    of every field together)."""
+    return Blosc(cname="lz4", clevel=5, shuffle=Blosc.SHUFFLE, typesize=itemsize)
 
 
 class StoreError(PipelineError, ValueError):
@@ -241,69 +256,106 @@ class RunStore:
         return fs, root.rstrip("/") + "/fragments"
 
     def write_fragment(self, key: str, rows: npt.NDArray[np.void], groups: npt.NDArray[np.int64]) -> None:
-        """Store a structured array ``rows`` as ``fragments/<key>.npy``.
+        """Store a structured array ``rows`` as ``fragments/<key>.frag``.
 
         ``groups`` (int64, shape (g, 2)) lists ``(group key, first row)`` of the row groups
-        the array is sorted by; it goes to ``fragments/<key>.idx.npy`` so that a reader
-        can fetch one group's rows without reading the rest (:meth:`read_fragment_rows`).
-        Fragments are scratch data between the map and the reduce phase: plain ``.npy``
-        objects beside the Zarr hierarchy, through fsspec, so any store URL works.
+        the array is sorted by, so that a reader can fetch one run of groups without the
+        rest (:meth:`read_fragment_rows`). The rows are compressed in blocks of
+        ``FRAGMENT_BLOCK_ROWS`` (Blosc-lz4, byte shuffle over whole rows: about 3.4x on
+        scans), each decompressible alone; the file is ``FRAGMENT_MAGIC``, the length of
+        a JSON header (little-endian uint64), the header (dtype, rows, block sizes,
+        groups), then the blocks. Fragments are scratch data between the map and the
+        reduce phase: objects beside the Zarr hierarchy, through fsspec, so any store
+        URL works. Measured on this machine's disk, writing files costs about 3 ms of CPU
+        per MB, several times Blosc's own cost, so compressing pays.
         """
+        rows = np.ascontiguousarray(rows)
+        size = rows.dtype.itemsize
+        raw = rows.view(np.uint8).reshape(-1) if len(rows) else np.zeros(0, np.uint8)
+        codec = _fragment_codec(size)
+        blocks = [codec.encode(raw[i * size:(i + FRAGMENT_BLOCK_ROWS) * size])
+                  for i in range(0, len(rows), FRAGMENT_BLOCK_ROWS)]
+        header = json.dumps({
+            "dtype": np.lib.format.dtype_to_descr(rows.dtype), "rows": len(rows),
+            "block_rows": FRAGMENT_BLOCK_ROWS, "block_bytes": [len(b) for b in blocks],
+            "groups": np.asarray(groups, dtype=np.int64).reshape(-1, 2).tolist(),
+        }).encode()
         fs, base = self._fs()
-        with fs.open(f"{base}/{key}.npy", "wb") as f:
-            np.save(f, rows, allow_pickle=False)
-        with fs.open(f"{base}/{key}.idx.npy", "wb") as f:
-            np.save(f, np.asarray(groups, dtype=np.int64).reshape(-1, 2), allow_pickle=False)
+        with fs.open(f"{base}/{key}.frag", "wb") as f:
+            f.write(FRAGMENT_MAGIC + np.uint64(len(header)).tobytes() + header)
+            for block in blocks:
+                f.write(block)
+
+    def _fragment_header(self, key: str) -> dict[str, Any]:
+        fs, base = self._fs()
+        with fs.open(f"{base}/{key}.frag", "rb") as f:
+            head = f.read(len(FRAGMENT_MAGIC) + 8)
+            if len(head) < len(FRAGMENT_MAGIC) + 8 or not head.startswith(FRAGMENT_MAGIC):
+                raise StoreError(f"fragment {key} of store {self.url} is damaged (bad magic)")
+            n = int(np.frombuffer(head[len(FRAGMENT_MAGIC):], dtype="<u8")[0])
+            info: dict[str, Any] = json.loads(f.read(n))
+        info["data_start"] = len(FRAGMENT_MAGIC) + 8 + n
+        info["block_start"] = np.concatenate([[0], np.cumsum(info["block_bytes"], dtype=np.int64)])
+        descr = info["dtype"]
+        if isinstance(descr, list):  # JSON turned the (name, format[, shape]) tuples into lists
+            descr = [(f[0], f[1], tuple(f[2])) if len(f) > 2 else (f[0], f[1]) for f in descr]
+        info["dtype"] = np.lib.format.descr_to_dtype(descr)
+        return info
 
     def read_fragment_groups(self, key: str) -> npt.NDArray[np.int64]:
         """The ``(group key, first row)`` table of a fragment."""
-        fs, base = self._fs()
-        with fs.open(f"{base}/{key}.idx.npy", "rb") as f:
-            return np.load(io.BytesIO(f.read()), allow_pickle=False)
+        groups = self._fragment_header(key)["groups"]
+        return np.asarray(groups, dtype=np.int64).reshape(-1, 2)
 
     def read_fragment_rows(self, key: str, start: int, stop: int,
                            out: npt.NDArray[np.void] | None = None) -> npt.NDArray[np.void]:
-        """Rows ``[start, stop)`` of a fragment, reading only those bytes.
+        """Rows ``[start, stop)`` of a fragment, reading and decompressing only the
+        blocks that hold them.
 
         With ``out`` (a contiguous array of the fragment's dtype and ``stop - start``
-        rows), the bytes are read straight into it and ``out`` is returned.
+        rows), the rows are written straight into it and ``out`` is returned.
         """
+        info = self._fragment_header(key)
+        dtype, size, per = info["dtype"], info["dtype"].itemsize, int(info["block_rows"])
+        stop = min(stop, int(info["rows"]))
+        if out is not None and (out.dtype != dtype or len(out) != max(stop - start, 0)):
+            raise StoreError(f"fragment {key}: rows {start}-{stop} of {dtype} do not fit "
+                             f"{len(out)} rows of {out.dtype}")
+        if out is None:
+            out = np.empty(max(stop - start, 0), dtype=dtype)
+        if stop <= start:
+            return out
+        first, last = start // per, (stop - 1) // per
+        lo, hi = int(info["block_start"][first]), int(info["block_start"][last + 1])
         fs, base = self._fs()
-        with fs.open(f"{base}/{key}.npy", "rb") as f:
-            version = np.lib.format.read_magic(f)
-            if version == (1, 0):
-                shape, _, dtype = np.lib.format.read_array_header_1_0(f)
+        with fs.open(f"{base}/{key}.frag", "rb") as f:
+            f.seek(info["data_start"] + lo)
+            data = f.read(hi - lo)
+        if len(data) != hi - lo:
+            raise StoreError(f"fragment {key} of store {self.url} is shorter than its header says")
+        codec = _fragment_codec(size)
+        dst = out.view(np.uint8).reshape(-1)
+        at = 0
+        for blk in range(first, last + 1):
+            a = int(info["block_start"][blk]) - lo
+            b = int(info["block_start"][blk + 1]) - lo
+            r0 = blk * per  # first row of the block
+            u, v = max(start, r0), min(stop, r0 + per)
+            if u == r0 and v - u == per:  # a whole block: straight into place
+                codec.decode(data[a:b], out=dst[at:at + (v - u) * size])
             else:
-                shape, _, dtype = np.lib.format.read_array_header_2_0(f)
-            stop = min(stop, shape[0])
-            if out is not None and (out.dtype != dtype or len(out) != max(stop - start, 0)):
-                raise StoreError(f"fragment {key}: rows {start}-{stop} of {dtype} do not fit "
-                                 f"{len(out)} rows of {out.dtype}")
-            if stop <= start:
-                return np.zeros(0, dtype=dtype) if out is None else out
-            f.seek(f.tell() + start * dtype.itemsize)
-            if out is None:
-                out = np.empty(stop - start, dtype=dtype)
-            view = memoryview(out.view(np.uint8).reshape(-1))
-            got = 0
-            while got < len(view):
-                n = f.readinto(view[got:]) if hasattr(f, "readinto") else None
-                if n is None:  # a file object without readinto
-                    data = f.read(len(view) - got)
-                    n = len(data)
-                    view[got:got + n] = data
-                if not n:
-                    raise StoreError(f"fragment {key} is shorter than its header says")
-                got += n
+                whole = np.frombuffer(codec.decode(data[a:b]), dtype=np.uint8)
+                dst[at:at + (v - u) * size] = whole[(u - r0) * size:(v - r0) * size]
+            at += (v - u) * size
         return out
 
     def delete_fragments(self, keys: Iterable[str] | None = None) -> None:
         """Delete the given fragments (all when ``keys`` is None)."""
         fs, base = self._fs()
         if keys is None:
-            paths = fs.glob(f"{base}/*.npy")
+            paths = fs.glob(f"{base}/*.frag") + fs.glob(f"{base}/*.npy")  # .npy: older layouts
         else:
-            paths = [f"{base}/{k}{suffix}" for k in keys for suffix in (".npy", ".idx.npy")]
+            paths = [f"{base}/{k}{suffix}" for k in keys for suffix in (".frag", ".npy", ".idx.npy")]
         for path in paths:
             if fs.exists(path):
                 fs.rm(path)
@@ -361,6 +413,12 @@ class _UnitWriter:
     written once (no read-modify-write of a partial last chunk) and each array's metadata
     is rewritten once per flush, not once per piece. At most ``FLUSH_CHUNKS`` chunks per
     array wait in memory.
+
+    Chunks are encoded here with the array's own codecs (bytes, then Blosc) and handed
+    to the store all at once: Zarr's general write path (a chunk buffer, a fill-value
+    comparison and two thread hops per chunk) cost about three times Blosc's own time.
+    Every chunk is written, the array's last one padded with the fill value as Zarr
+    pads it; arrays with other codecs go through Zarr's path.
     """
 
     FLUSH_CHUNKS = 4
@@ -382,11 +440,13 @@ class _UnitWriter:
         self._pending[name], self._n_pending[name], self._n_written[name] = [], 0, 0
         return arr
 
-    def _flush(self, name: str, *, final: bool) -> None:
+    def _flush(self, name: str, *, final: bool) -> list[tuple[str, bytes]]:
+        """Write the whole chunks held back for ``name`` (all rows when ``final``);
+        returns the encoded chunks still to be stored (``(key, bytes)``)."""
         n = self._n_pending[name]
         take = n if final else (n // CHUNK_POINTS) * CHUNK_POINTS
         if take == 0:
-            return
+            return []
         pieces = self._pending[name]
         values = pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
         arr, start = self._arrays[name], self._n_written[name]
@@ -394,13 +454,51 @@ class _UnitWriter:
             arr.resize((start + take, *values.shape[1:]))
         elif start + take > self._n_rows:
             raise StoreError(f"{self._group.path}/{name}: more than the {self._n_rows} rows announced")
-        arr[start:start + take] = values[:take]
+        encoded = self._encode(arr, start, values[:take])
+        if encoded is None:
+            arr[start:start + take] = values[:take]
+            encoded = []
         rest = values[take:]
         self._pending[name] = [rest] if len(rest) else []
         self._n_pending[name] = len(rest)
         self._n_written[name] = start + take
+        return encoded
+
+    @staticmethod
+    def _encode(arr: zarr.Array, start: int, values: npt.NDArray[Any]) -> list[tuple[str, bytes]] | None:
+        """Rows ``values`` from row ``start`` (a chunk boundary) as encoded chunks, or
+        None where this array's codecs are not the store's own (bytes + Blosc)."""
+        codecs = arr.metadata.codecs
+        if not (len(codecs) == 2 and isinstance(codecs[0], BytesCodec) and isinstance(codecs[1], BloscCodec)
+                and start % CHUNK_POINTS == 0 and arr.chunks[0] == CHUNK_POINTS
+                and values.dtype.byteorder in "=|<" and arr.metadata.fill_value == 0):
+            return None
+        blosc = codecs[1]._blosc_codec  # the numcodecs codec Zarr itself calls
+        out = []
+        for i in range(0, len(values), CHUNK_POINTS):
+            piece = values[i:i + CHUNK_POINTS]
+            if len(piece) < CHUNK_POINTS:  # the array's last chunk: padded with the fill value
+                full = np.zeros((CHUNK_POINTS, *values.shape[1:]), dtype=values.dtype)
+                full[:len(piece)] = piece
+                piece = full
+            raw = np.ascontiguousarray(piece).reshape(-1).view(np.uint8)
+            key = arr.metadata.encode_chunk_key(((start + i) // CHUNK_POINTS,) + (0,) * (values.ndim - 1))
+            out.append((f"{arr.store_path.path}/{key}", blosc.encode(raw)))
+        return out
+
+    def _store(self, encoded: list[tuple[str, bytes]]) -> None:
+        if not encoded:
+            return
+        store = self._group.store_path.store
+        proto = default_buffer_prototype()
+
+        async def put_all() -> None:
+            await asyncio.gather(*(store.set(key, proto.buffer.from_bytes(data)) for key, data in encoded))
+
+        sync(put_all())
 
     def append(self, arrays: Mapping[str, npt.NDArray[Any]]) -> None:
+        encoded: list[tuple[str, bytes]] = []
         for name, values in arrays.items():
             values = np.asarray(values)
             if name not in self._arrays:
@@ -409,16 +507,19 @@ class _UnitWriter:
                 self._pending[name].append(values)
                 self._n_pending[name] += len(values)
                 if self._n_pending[name] >= self.FLUSH_CHUNKS * CHUNK_POINTS:
-                    self._flush(name, final=False)
+                    encoded += self._flush(name, final=False)
+        self._store(encoded)
 
     def close(self, templates: Mapping[str, npt.NDArray[Any]]) -> None:
         """Write what is held back; create the arrays that never received rows, empty,
         from ``templates``."""
+        encoded: list[tuple[str, bytes]] = []
         for name in list(self._arrays):
-            self._flush(name, final=True)
+            encoded += self._flush(name, final=True)
             if self._n_rows is not None and self._n_written[name] != self._n_rows:
                 raise StoreError(f"{self._group.path}/{name}: {self._n_written[name]} rows written, "
                                  f"{self._n_rows} announced")
+        self._store(encoded)
         for name, values in templates.items():
             if name not in self._arrays:
                 self._create(name, np.asarray(values))

@@ -1,0 +1,77 @@
+"""Run store I/O of the ingest: compressed fragments read by row range, and the tile
+writer that encodes Zarr chunks itself (read back through Zarr)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tiling.store import CHUNK_POINTS, FRAGMENT_BLOCK_ROWS, RunStore, StoreError
+
+
+@pytest.fixture
+def store(tmp_path) -> RunStore:
+    return RunStore.create(tmp_path / "s.zarr", attrs={})
+
+
+def _rows(n: int, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    dt = np.dtype([("xyz", "<i4", (3,)), ("index", "<u8"), ("core", "?"), ("rgb", "<u2", (3,))])
+    rows = np.zeros(n, dt)
+    rows["xyz"] = rng.integers(-1000, 1000, (n, 3))
+    rows["index"] = rng.permutation(n)
+    rows["core"] = rng.random(n) < 0.8
+    rows["rgb"] = rng.integers(0, 65535, (n, 3))
+    return rows
+
+
+def test_fragment_row_ranges_across_blocks(store):
+    n = 2 * FRAGMENT_BLOCK_ROWS + 123
+    rows = _rows(n)
+    groups = np.array([[5, 0], [9, 70_000], [np.iinfo(np.int64).max, n]], dtype=np.int64)
+    store.write_fragment("m0000000_t0000001", rows, groups)
+    assert np.array_equal(store.read_fragment_groups("m0000000_t0000001"), groups)
+    cuts = [(0, n), (0, 1), (FRAGMENT_BLOCK_ROWS - 3, FRAGMENT_BLOCK_ROWS + 5),
+            (FRAGMENT_BLOCK_ROWS, 2 * FRAGMENT_BLOCK_ROWS), (n - 7, n), (100, 100), (n - 2, n + 50)]
+    for a, b in cuts:
+        assert np.array_equal(store.read_fragment_rows("m0000000_t0000001", a, b), rows[a:b])
+    out = np.empty(10, rows.dtype)
+    assert store.read_fragment_rows("m0000000_t0000001", 50, 60, out=out) is out
+    assert np.array_equal(out, rows[50:60])
+    with pytest.raises(StoreError):
+        store.read_fragment_rows("m0000000_t0000001", 50, 61, out=out)
+    store.write_fragment("empty", rows[:0], groups[-1:])
+    assert len(store.read_fragment_rows("empty", 0, 10)) == 0
+    store.delete_fragments(["m0000000_t0000001"])
+    store.delete_fragments()
+    assert not [p for p in (Path(store.url) / "fragments").iterdir() if p.name != "zarr.json"]
+
+
+@pytest.mark.parametrize("n_rows", [0, 1, CHUNK_POINTS, 4 * CHUNK_POINTS + 17, 9 * CHUNK_POINTS - 1])
+@pytest.mark.parametrize("known", [True, False])
+def test_unit_writer_round_trip(store, n_rows, known):
+    rng = np.random.default_rng(n_rows)
+    data = {"xyz": rng.integers(-5, 5, (n_rows, 3)).astype(np.int32),
+            "index": np.arange(n_rows, dtype=np.uint64), "core": rng.random(n_rows) < 0.5,
+            "zero": np.zeros(n_rows, np.uint8), "t": rng.random(n_rows)}
+    w = store.unit_writer("tiles/0", n_rows=n_rows if known else None)
+    at = 0
+    for step in (1, 300_000, 1_000_000, 10**9):  # uneven pieces
+        w.append({k: v[at:at + step] for k, v in data.items()})
+        at += step
+        if at >= n_rows:
+            break
+    w.close({k: v[:0] for k, v in data.items()})
+    back = store.read_unit("tiles/0")
+    assert back.keys() == data.keys()
+    for k, v in data.items():
+        assert back[k].dtype == v.dtype and np.array_equal(back[k], v), k
+
+
+def test_unit_writer_refuses_more_rows_than_announced(store):
+    w = store.unit_writer("tiles/0", n_rows=5)
+    with pytest.raises(StoreError):
+        w.append({"a": np.zeros(6, np.int32)})
+        w.close({})
