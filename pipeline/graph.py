@@ -109,6 +109,7 @@ def task_runner(
     if scheduler == "sync":
         yield _sync_runner(progress)
         return
+    import dask
     from distributed import Client, LocalCluster
 
     # distributed sets its loggers to INFO when imported; keep them quiet unless the
@@ -119,7 +120,11 @@ def task_runner(
             logging.getLogger(name).setLevel(logging.WARNING)
 
     if scheduler is None:
-        with LocalCluster(
+        # In-process workers share the GIL with their tasks: no statistical profiler
+        # sampling every worker thread every 10 ms there.
+        quiet = contextlib.nullcontext() if processes else dask.config.set(
+            {"distributed.worker.profile.enabled": False})
+        with quiet, LocalCluster(
             n_workers=workers, threads_per_worker=1, processes=processes,
             dashboard_address=":0", silence_logs=logging.ERROR,
         ) as cluster, Client(cluster) as client:
