@@ -96,3 +96,16 @@ def test_morton_index_order_matches_index_then_morton(dup):
     perm = np.argsort(index)
     expected = perm[morton_order(xyz[perm], origin=origin, cell=10.0)]
     assert np.array_equal(morton_index_order(xyz, index, origin=origin, cell=10.0), expected)
+
+
+def test_radix_sorts_agree_and_are_stable():
+    from tiling.kernels import _radix_packed, _radix_pairs
+
+    rng = np.random.default_rng(5)
+    code = rng.integers(0, 2**20, 50_000).astype(np.uint64)
+    code[::7] = code[0]  # ties
+    expected = np.argsort(code, kind="stable")
+    p1, c1 = _radix_packed(code.copy(), 20, 16)
+    p2, c2 = _radix_pairs(code.copy(), 20)
+    assert np.array_equal(p1, expected) and np.array_equal(p2, expected)
+    assert np.array_equal(c1, code[expected]) and np.array_equal(c2, code[expected])

@@ -15,7 +15,8 @@ and are cached on disk next to this file (the first use compiles them, a few sec
 - :func:`split_rows`: fields of structured rows, in a given order, as contiguous columns
   (NumPy: whole rows first, then each field);
 - :func:`morton_index_order`: the permutation that sorts rows by 3-D Morton code and,
-  within a code, by original index (LSD radix sort, then the rare ties).
+  within a code, by original index (LSD radix sort of code and row packed in one word,
+  then the rare ties).
 """
 
 from __future__ import annotations
@@ -259,26 +260,49 @@ def _spread3(v):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, nogil=True)
-def _morton_index_order(xyz, index, origin, cell):  # type: ignore[no-untyped-def]
-    n = xyz.shape[0]
-    top = 2.0**21 - 1
-    code = np.empty(n, np.uint64)
-    hi = np.uint64(0)
+def _radix_packed(code, bits, pos_bits):  # type: ignore[no-untyped-def]
+    """Stable LSD radix sort of ``code`` (below ``2**bits``) with each row's position
+    packed below it (``bits + pos_bits <= 64``): one array moves per pass. Returns the
+    permutation and the sorted codes."""
+    n = len(code)
+    key = np.empty(n, np.uint64)
     for i in range(n):
-        c = np.uint64(0)
-        for a in range(3):
-            q = np.floor((np.float64(xyz[i, a]) - origin[a]) / cell)
-            if q < 0.0:
-                q = 0.0
-            if q > top:
-                q = top
-            c |= _spread3(np.uint64(q)) << np.uint64(a)
-        code[i] = c
-        hi |= c
-    bits = 0
-    while bits < 64 and (hi >> np.uint64(bits)) != np.uint64(0):
-        bits += 1
-    # LSD radix sort on 11-bit digits, stable: equal codes keep the row order
+        key[i] = (code[i] << np.uint64(pos_bits)) | np.uint64(i)
+    passes = (bits + 10) // 11
+    if passes > 0:
+        digit = (bits + passes - 1) // passes
+        size = 1 << digit
+        mask = np.uint64(size - 1)
+        count = np.zeros((passes, size + 1), np.int64)
+        for i in range(n):  # every pass's histogram in one read
+            k = key[i] >> np.uint64(pos_bits)
+            for p in range(passes):
+                count[p, ((k >> np.uint64(p * digit)) & mask) + 1] += 1
+        tmp = np.empty(n, np.uint64)
+        for p in range(passes):
+            c = count[p]
+            for d in range(size):
+                c[d + 1] += c[d]
+            sh = np.uint64(pos_bits + p * digit)
+            for i in range(n):
+                d = (key[i] >> sh) & mask
+                j = c[d]
+                tmp[j] = key[i]
+                c[d] = j + 1
+            key, tmp = tmp, key
+    low = np.uint64((1 << pos_bits) - 1)
+    perm = np.empty(n, np.int64)
+    out = np.empty(n, np.uint64)
+    for i in range(n):
+        perm[i] = np.int64(key[i] & low)
+        out[i] = key[i] >> np.uint64(pos_bits)
+    return perm, out
+
+
+@numba.njit(cache=True, nogil=True)
+def _radix_pairs(code, bits):  # type: ignore[no-untyped-def]
+    """Stable LSD radix sort of ``code`` carrying the row numbers alongside (any size)."""
+    n = len(code)
     perm = np.arange(n).astype(np.int64)
     tmp_p = np.empty(n, np.int64)
     tmp_c = np.empty(n, np.uint64)
@@ -302,6 +326,36 @@ def _morton_index_order(xyz, index, origin, cell):  # type: ignore[no-untyped-de
         code, tmp_c = tmp_c, code
         perm, tmp_p = tmp_p, perm
         shift += digit
+    return perm, code
+
+
+@numba.njit(cache=True, nogil=True)
+def _morton_index_order(xyz, index, origin, cell):  # type: ignore[no-untyped-def]
+    n = xyz.shape[0]
+    top = 2.0**21 - 1
+    code = np.empty(n, np.uint64)
+    hi = np.uint64(0)
+    for i in range(n):
+        c = np.uint64(0)
+        for a in range(3):
+            q = np.floor((np.float64(xyz[i, a]) - origin[a]) / cell)
+            if q < 0.0:
+                q = 0.0
+            if q > top:
+                q = top
+            c |= _spread3(np.uint64(q)) << np.uint64(a)
+        code[i] = c
+        hi |= c
+    bits = 0
+    while bits < 64 and (hi >> np.uint64(bits)) != np.uint64(0):
+        bits += 1
+    pos_bits = 1
+    while (1 << pos_bits) < n:
+        pos_bits += 1
+    if bits + pos_bits <= 64:
+        perm, code = _radix_packed(code, bits, pos_bits)
+    else:
+        perm, code = _radix_pairs(code, bits)
     # equal codes (points in one cell): by original index, as after an index sort
     i = 0
     while i < n:
