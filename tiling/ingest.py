@@ -21,6 +21,7 @@ import json
 import math
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -358,8 +359,8 @@ def map_chunk(url: str, unit: MapUnit, plan_attrs: dict[str, Any]) -> dict[str, 
     """Map task: route records of ``unit`` to tiles; write fragments, then the record.
 
     Every fragment holds one tile's rows sorted by x-y sub-cell (then by record), with a
-    table of its sub-cells' first rows. Routing, ordering and row building are compiled
-    kernels (tiling/kernels.py). Returns ``{tile: number of points}`` for the tiles this
+    table of its sub-cells' first rows. Routing and that order come from one compiled
+    kernel (tiling/kernels.py). Returns ``{tile: number of points}`` for the tiles this
     unit wrote.
     """
     store = RunStore.open(url, mode="a")
@@ -470,42 +471,20 @@ def reduce_tile(url: str, tile: int, keys: Sequence[str], plan_attrs: dict[str, 
     # Without voxels the tile's length is known: its arrays are made once at full size.
     writer = store.unit_writer(f"tiles/{tile}", n_rows=None if voxel else sum(totals.values()))
     n_points = n_core = 0
-    for lo, hi in batches:
-        spans = []
-        for k, groups in tables.items():
-            a = int(np.searchsorted(groups[:, 0], lo, side="left"))
-            b = int(np.searchsorted(groups[:, 0], hi, side="right"))
-            if a < b:  # the sentinel keeps b < len(groups)
-                spans.append((k, int(groups[a, 1]), int(groups[b, 1])))
-        rows = np.empty(sum(b - a for _, a, b in spans), dtype=dtype)
-        at = 0
-        for k, a, b in spans:
-            store.read_fragment_rows(k, a, b, out=rows[at:at + b - a])
-            at += b - a
-        index = np.ascontiguousarray(rows["index"])
-        extra: dict[str, np.ndarray] = {}
-        if voxel:
-            perm = np.argsort(index)  # unique within a tile: any sort is stable
-            xyz_i, idx_i = np.take(rows["xyz"], perm, axis=0), np.take(index, perm)
-            keep, rep = _voxel_representatives(
-                xyz_i, idx_i, np.take(rows["core_tile"], perm), scale=scale, voxel=voxel
-            )
-            dropped = np.take(rows["core"], perm) & ~keep
-            extra["voxel_dropped"] = idx_i[dropped]
-            extra["voxel_representative"] = idx_i[rep[dropped]]
-            perm = perm[keep]
-            xyz, index = np.take(rows["xyz"], perm, axis=0), np.take(index, perm)
-        else:
-            perm = np.arange(len(rows))
-            xyz = np.ascontiguousarray(rows["xyz"])
-        origin = np.array([(x0 - offset[0]) / scale[0], (y0 - offset[1]) / scale[1],
-                           float(xyz[:, 2].min()) if len(xyz) else 0.0])
-        # Morton order, equal codes by original index: independent of fragment order
-        perm = perm[morton_index_order(xyz, index, origin=origin, cell=cell)]
-        out = split_rows(rows, names, perm)
-        writer.append({**out, **extra})
-        n_points += len(perm)
-        n_core += int(np.count_nonzero(out["core"]))
+    # One batch is encoded and written (Blosc and file writes release the GIL) while the
+    # next is read and sorted: a dense tile's reduce then uses two cores, not one.
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="tile-writer") as pool:
+        pending: Future[None] | None = None
+        for lo, hi in batches:
+            rows_out, extra = _reduce_batch(store, tables, lo, hi, dtype=dtype, names=names, voxel=voxel,
+                                            scale=scale, offset=offset, corner=(x0, y0), cell=cell)
+            if pending is not None:
+                pending.result()
+            pending = pool.submit(writer.append, {**rows_out, **extra})
+            n_points += len(rows_out["index"])
+            n_core += int(np.count_nonzero(rows_out["core"]))
+        if pending is not None:
+            pending.result()
     empty = np.zeros(0, dtype=dtype)
     writer.close({**{n: empty[n] for n in names},
                   **({"voxel_dropped": np.zeros(0, np.uint64), "voxel_representative": np.zeros(0, np.uint64)}
@@ -517,6 +496,48 @@ def reduce_tile(url: str, tile: int, keys: Sequence[str], plan_attrs: dict[str, 
     })
     store.delete_fragments(keys)
     return n_points
+
+
+def _reduce_batch(
+    store: RunStore, tables: dict[str, npt.NDArray[np.int64]], lo: int, hi: int, *, dtype: np.dtype,
+    names: list[str], voxel: float | None, scale: npt.NDArray[np.float64], offset: npt.NDArray[np.float64],
+    corner: tuple[float, float], cell: float,
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """The rows of sub-cells ``lo..hi`` of every fragment of a tile, Morton-sorted (and
+    voxel-downsampled), as columns; plus the voxel tables."""
+    x0, y0 = corner
+    spans = []
+    for k, groups in tables.items():
+        a = int(np.searchsorted(groups[:, 0], lo, side="left"))
+        b = int(np.searchsorted(groups[:, 0], hi, side="right"))
+        if a < b:  # the sentinel keeps b < len(groups)
+            spans.append((k, int(groups[a, 1]), int(groups[b, 1])))
+    rows = np.empty(sum(b - a for _, a, b in spans), dtype=dtype)
+    at = 0
+    for k, a, b in spans:
+        store.read_fragment_rows(k, a, b, out=rows[at:at + b - a])
+        at += b - a
+    index = np.ascontiguousarray(rows["index"])
+    extra: dict[str, np.ndarray] = {}
+    if voxel:
+        perm = np.argsort(index)  # unique within a tile: any sort is stable
+        xyz_i, idx_i = np.take(rows["xyz"], perm, axis=0), np.take(index, perm)
+        keep, rep = _voxel_representatives(
+            xyz_i, idx_i, np.take(rows["core_tile"], perm), scale=scale, voxel=voxel
+        )
+        dropped = np.take(rows["core"], perm) & ~keep
+        extra["voxel_dropped"] = idx_i[dropped]
+        extra["voxel_representative"] = idx_i[rep[dropped]]
+        perm = perm[keep]
+        xyz, index = np.take(rows["xyz"], perm, axis=0), np.take(index, perm)
+    else:
+        perm = np.arange(len(rows))
+        xyz = np.ascontiguousarray(rows["xyz"])
+    origin = np.array([(x0 - offset[0]) / scale[0], (y0 - offset[1]) / scale[1],
+                       float(xyz[:, 2].min()) if len(xyz) else 0.0])
+    # Morton order, equal codes by original index: independent of fragment order
+    perm = perm[morton_index_order(xyz, index, origin=origin, cell=cell)]
+    return split_rows(rows, names, perm), extra
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -626,7 +647,14 @@ def ingest(
         for t in tiles_of[map_id]:
             if int(t) in keys:
                 keys[int(t)].append(fragment_key(map_id, int(t)))
-    todo_tiles = [t for t in plan.tiles if str(t) not in done_tiles]
+    # Largest tiles first: a scan's density peaks around its stations, so one tile may
+    # hold half the points; started last it would run alone while the workers idle.
+    rows_of = {t: 0 for t in plan.tiles}
+    for counts in tiles_of.values():
+        for t, n in counts.items():
+            if int(t) in rows_of:
+                rows_of[int(t)] += int(n)
+    todo_tiles = sorted((t for t in plan.tiles if str(t) not in done_tiles), key=lambda t: (-rows_of[t], t))
     runner(reduce_tile, [(url, t, keys[t], attrs) for t in todo_tiles], "ingest: tiles")
     store.delete_fragments()
 
