@@ -427,19 +427,24 @@ def _int_list(text: str) -> tuple[int, ...]:
 
 
 def _cmd_ingest(args: argparse.Namespace) -> int:
+    import gc
+
     from pipeline.graph import task_runner, tune_process_for_streaming
     from tiling.errors import ConfigError
     from tiling.ingest import IngestParams, ingest
 
-    if args.scheduler == "sync" or (args.scheduler is None and not args.processes):
-        tune_process_for_streaming()  # the tasks run in this process
     params = IngestParams(
         tile_size=args.tile_size, buffer=args.buffer, voxel=args.voxel, bbox=args.bbox,
         tiles=args.tiles, chunk_size=args.chunk_size,
     )
     try:
+        in_process = args.scheduler == "sync" or (args.scheduler is None and not args.processes)
+        if in_process:  # the tasks run in this process: before its worker threads exist
+            tune_process_for_streaming()
         with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress,
                          processes=args.processes) as run:
+            if in_process:
+                gc.freeze()  # the cluster's own long-lived objects too
             report = ingest([str(p) for p in args.inputs], args.store, params, runner=run)
     except OSError as exc:
         if args.scheduler not in (None, "sync") and "scheduler" not in str(exc).lower():

@@ -42,7 +42,9 @@ def tune_process_for_streaming() -> None:
       garbage collector's view (``gc.freeze``): its full passes, triggered by the many
       small objects of Zarr's asynchronous writes, otherwise revisit them each time.
 
-    A no-op where glibc is not the C library.
+    Call it before any worker thread starts: glibc gives each thread an arena when it
+    first allocates, and large blocks of a thread's own arena are always separate
+    mappings. Only the allocator part is a no-op where glibc is not the C library.
     """
     import ctypes
     import gc
@@ -54,9 +56,10 @@ def tune_process_for_streaming() -> None:
     except (OSError, AttributeError):
         return
     m_trim_threshold, m_mmap_threshold, m_arena_max = -1, -3, -8
+    mallopt.argtypes = [ctypes.c_int, ctypes.c_int]  # the value is a C int: 1 GiB fits
     mallopt(m_arena_max, 1)
     mallopt(m_mmap_threshold, 1 << 30)
-    mallopt(m_trim_threshold, 1 << 31)
+    mallopt(m_trim_threshold, 1 << 30)
 
 
 def _bar(total: int, desc: str, progress: bool) -> tqdm:
