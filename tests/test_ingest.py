@@ -296,3 +296,21 @@ def test_unreachable_scheduler(scan_file, tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2, err
     assert "scheduler" in err
+
+
+@pytest.mark.cluster
+def test_cli_default_thread_cluster_gives_the_same_store(scan_file, tmp_path):
+    """`hollowtree ingest` without --scheduler runs its tasks on worker threads in its own
+    process (and tunes that process); the store equals an in-process sync run's."""
+    common = [str(scan_file), "--tile-size", "10", "--buffer", "1", "--chunk-size", "20000", "--no-progress"]
+    sync = subprocess.run([sys.executable, "-m", "pipeline.cli", "ingest", "--store", str(tmp_path / "sync"),
+                           "--scheduler", "sync", *common], capture_output=True, text=True)
+    assert sync.returncode == 0, sync.stderr
+    threads = subprocess.run([sys.executable, "-m", "pipeline.cli", "ingest", "--store", str(tmp_path / "thr"),
+                              *common], capture_output=True, text=True)
+    assert threads.returncode == 0, threads.stderr
+    a, b = _tiles(tmp_path / "sync"), _tiles(tmp_path / "thr")
+    assert a.keys() == b.keys()
+    for t in a:
+        for name in a[t]:
+            assert np.array_equal(a[t][name], b[t][name]), (t, name)
