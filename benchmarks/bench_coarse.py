@@ -390,6 +390,13 @@ def bench_site(site: str, args: argparse.Namespace, tmp: Path) -> dict:
     lines: list[str] = []
     notes: list[str] = []
     summary: dict = {"site": site, "info": info}
+    if args.only_repeats:
+        from primitives.dbscan import default_eps
+
+        eps = default_eps(xyz)
+        run_tile_kernel(xyz[:50_000], eps)  # compiles or loads numba's kernels outside the timings
+        repeat_tile_kernel_vs_cgal_tuned(xyz, gt_cls, gt_inst, eps, args, tmp, summary)
+        return summary
 
     # ours
     ours = None
@@ -559,6 +566,8 @@ def main() -> None:
     ap.add_argument("--no-open3d", action="store_true")
     ap.add_argument("--repeats", type=int, default=1,
                     help="also run the tile kernel (seeds 0..N-1) and CGAL tuned N times each, means side by side")
+    ap.add_argument("--only-repeats", action="store_true",
+                    help="run only the repeated tile kernel against CGAL tuned (with --repeats N)")
     ap.add_argument("--open3d-iters", type=int, default=1000, help="RANSAC iterations per Open3D plane")
     ap.add_argument("--pyransac-iters", type=int, default=200)
     ap.add_argument("--pyransac-max-planes", type=int, default=30)
