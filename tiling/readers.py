@@ -382,17 +382,23 @@ def _las_blocks(p: Path, chunk: int, start: int, stop: int | None) -> Iterator[P
             if len(rec) != k:
                 raise CorruptInputError(f"{p}: truncated LAS/LAZ: the header promises {n} points "
                                         f"but the data ends after {pos + len(rec)}")
+            # Scaled coordinates computed straight into their columns, as laspy computes
+            # them (X * scale + offset); plain fields are views of the block's records
+            # (no copies: blocks are read-only to their consumers).
             xyz = np.empty((k, 3))
-            xyz[:, 0], xyz[:, 1], xyz[:, 2] = rec.x, rec.y, rec.z
+            raw = rec.array
+            for axis, name in enumerate("XYZ"):
+                np.multiply(raw[name], h.scales[axis], out=xyz[:, axis])
+                np.add(xyz[:, axis], h.offsets[axis], out=xyz[:, axis])
             yield PointBlock(
                 xyz=xyz, index=np.arange(pos, pos + k, dtype=np.uint64),
-                intensity=np.array(rec.intensity, dtype=np.uint16),
-                rgb=(np.stack([rec.red, rec.green, rec.blue], axis=1).astype(np.uint16)
+                intensity=np.asarray(rec.intensity, dtype=np.uint16),
+                rgb=(np.stack([rec.red, rec.green, rec.blue], axis=1).astype(np.uint16, copy=False)
                      if "red" in names else None),
-                return_number=np.array(rec.return_number, dtype=np.uint8),
-                number_of_returns=np.array(rec.number_of_returns, dtype=np.uint8),
-                gps_time=np.array(rec.gps_time, dtype=np.float64) if "gps_time" in names else None,
-                extra={e: np.array(rec[e]) for e in extras},
+                return_number=np.asarray(rec.return_number, dtype=np.uint8),
+                number_of_returns=np.asarray(rec.number_of_returns, dtype=np.uint8),
+                gps_time=np.asarray(rec.gps_time, dtype=np.float64) if "gps_time" in names else None,
+                extra={e: np.asarray(rec[e]) for e in extras},
             )
             pos += k
 
