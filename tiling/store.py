@@ -442,49 +442,67 @@ class _UnitWriter:
 
     def _flush(self, name: str, *, final: bool) -> list[tuple[str, bytes]]:
         """Write the whole chunks held back for ``name`` (all rows when ``final``);
-        returns the encoded chunks still to be stored (``(key, bytes)``)."""
+        returns the encoded chunks still to be stored (``(key, bytes)``).
+
+        Pieces may be strided views (a field of a structured array): each chunk is
+        made contiguous on its own, a chunk's worth of copying at a time, and never the
+        whole pending run at once.
+        """
         n = self._n_pending[name]
         take = n if final else (n // CHUNK_POINTS) * CHUNK_POINTS
         if take == 0:
             return []
         pieces = self._pending[name]
-        values = pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
+        first = pieces[0]
         arr, start = self._arrays[name], self._n_written[name]
         if self._n_rows is None:
-            arr.resize((start + take, *values.shape[1:]))
+            arr.resize((start + take, *first.shape[1:]))
         elif start + take > self._n_rows:
             raise StoreError(f"{self._group.path}/{name}: more than the {self._n_rows} rows announced")
-        encoded = self._encode(arr, start, values[:take])
-        if encoded is None:
+        blosc = self._blosc(arr, start, first)
+        encoded: list[tuple[str, bytes]] = []
+        if blosc is None:  # Zarr's own path, whole
+            values = np.concatenate(pieces)
             arr[start:start + take] = values[:take]
-            encoded = []
-        rest = values[take:]
-        self._pending[name] = [rest] if len(rest) else []
-        self._n_pending[name] = len(rest)
+            rest = values[take:]
+            pieces = [rest] if len(rest) else []
+        else:
+            for done in range(0, take, CHUNK_POINTS):
+                need = min(CHUNK_POINTS, take - done)
+                parts = []
+                while need:
+                    p = pieces[0]
+                    if len(p) <= need:
+                        parts.append(p)
+                        pieces.pop(0)
+                        need -= len(p)
+                    else:
+                        parts.append(p[:need])
+                        pieces[0] = p[need:]
+                        need = 0
+                chunk = np.ascontiguousarray(parts[0]) if len(parts) == 1 else np.concatenate(parts)
+                if len(chunk) < CHUNK_POINTS:  # the array's last chunk: padded with the fill value
+                    full = np.zeros((CHUNK_POINTS, *chunk.shape[1:]), dtype=chunk.dtype)
+                    full[:len(chunk)] = chunk
+                    chunk = full
+                key = arr.metadata.encode_chunk_key(((start + done) // CHUNK_POINTS,) + (0,) * (chunk.ndim - 1))
+                encoded.append((f"{arr.store_path.path}/{key}", blosc.encode(chunk.reshape(-1).view(np.uint8))))
+        self._pending[name] = pieces
+        self._n_pending[name] = n - take
         self._n_written[name] = start + take
         return encoded
 
     @staticmethod
-    def _encode(arr: zarr.Array, start: int, values: npt.NDArray[Any]) -> list[tuple[str, bytes]] | None:
-        """Rows ``values`` from row ``start`` (a chunk boundary) as encoded chunks, or
-        None where this array's codecs are not the store's own (bytes + Blosc)."""
+    def _blosc(arr: zarr.Array, start: int, values: npt.NDArray[Any]) -> Any:
+        """The numcodecs Blosc codec that Zarr itself calls for this array's chunks, or
+        None where the array's codecs are not the store's own (bytes + Blosc) or the
+        rows do not start on a chunk boundary."""
         codecs = arr.metadata.codecs
         if not (len(codecs) == 2 and isinstance(codecs[0], BytesCodec) and isinstance(codecs[1], BloscCodec)
                 and start % CHUNK_POINTS == 0 and arr.chunks[0] == CHUNK_POINTS
                 and values.dtype.byteorder in "=|<" and arr.metadata.fill_value == 0):
             return None
-        blosc = codecs[1]._blosc_codec  # the numcodecs codec Zarr itself calls
-        out = []
-        for i in range(0, len(values), CHUNK_POINTS):
-            piece = values[i:i + CHUNK_POINTS]
-            if len(piece) < CHUNK_POINTS:  # the array's last chunk: padded with the fill value
-                full = np.zeros((CHUNK_POINTS, *values.shape[1:]), dtype=values.dtype)
-                full[:len(piece)] = piece
-                piece = full
-            raw = np.ascontiguousarray(piece).reshape(-1).view(np.uint8)
-            key = arr.metadata.encode_chunk_key(((start + i) // CHUNK_POINTS,) + (0,) * (values.ndim - 1))
-            out.append((f"{arr.store_path.path}/{key}", blosc.encode(raw)))
-        return out
+        return codecs[1]._blosc_codec
 
     def _store(self, encoded: list[tuple[str, bytes]]) -> None:
         if not encoded:
