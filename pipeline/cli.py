@@ -13,6 +13,7 @@ import sys
 from collections.abc import Sequence
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
+from typing import Any
 
 from tiling.errors import PipelineError
 
@@ -29,10 +30,31 @@ def _version() -> str:
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with exit code 2 and a one-line message for usage errors."""
+    """argparse with exit code 2 and a one-line message for usage errors.
+
+    ``late_description``: a callable that makes the description when help is shown, for
+    descriptions whose making imports heavy modules (every command builds the parser).
+    """
+
+    late_description: Any = None
 
     def error(self, message: str) -> None:  # type: ignore[override]
         self.exit(2, f"{self.prog}: error: {message}\n")
+
+    def format_help(self) -> str:
+        if self.late_description is not None:
+            self.description = self.late_description()
+        return super().format_help()
+
+
+def _synth_description() -> str:
+    from scenes.sites import SITES, TEST_SCENES  # scenes imports take ~0.3 s: only for this help
+
+    return (
+        "Scan a synthetic site with a virtual terrestrial laser scanner and write a "
+        "LAS 1.4 / LAZ file with per-point ground truth, plus a Parquet table of the "
+        f"elements. Sites: {', '.join(SITES)}. Test scenes: {', '.join(TEST_SCENES)}."
+    )
 
 
 def _positive_int(text: str) -> int:
@@ -73,17 +95,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
-    from scenes.sites import SITES, TEST_SCENES
-
     s = sub.add_parser(
         "synth",
         help="make a labelled synthetic scan of a site (LAS/LAZ with gt_class, gt_instance)",
-        description=(
-            "Scan a synthetic site with a virtual terrestrial laser scanner and write a "
-            "LAS 1.4 / LAZ file with per-point ground truth, plus a Parquet table of the "
-            f"elements. Sites: {', '.join(SITES)}. Test scenes: {', '.join(TEST_SCENES)}."
-        ),
     )
+    s.late_description = _synth_description
     s.add_argument("site", help="site or test scene name")
     s.add_argument("--out", required=True, type=Path, help="output .laz or .las file")
     size = s.add_mutually_exclusive_group()
