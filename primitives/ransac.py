@@ -87,7 +87,6 @@ from primitives.score import (
     PointColumns,
     compatible_counts,
     compatible_mask,
-    point_columns,
     shared_hits,
 )
 from primitives.shapes import (
