@@ -101,3 +101,22 @@ def test_shared_hits_matches_numpy():
     np.testing.assert_array_equal(shared, (hits & mask).sum(axis=1))
     own, shared = shared_hits(np.zeros((0, 4), dtype=bool), np.ones(4, dtype=bool))
     assert own.shape == shared.shape == (0,)
+
+
+def test_kernel_reads_columns_without_gathers():
+    """The kernel's point index is unsigned: with a signed one numba cannot rule out a
+    negative (wrapping) index and LLVM reads every column through vector gathers, about
+    10x slower (docs/benchmarks.md). Compiled afresh, since cached code has no assembly."""
+    import numba
+
+    from primitives import score
+
+    fresh = numba.njit(nogil=True)(score._kernel.py_func)
+    xyz, nrm, params = _scene(0, "plane")
+    pts = point_columns(xyz, nrm)
+    counts = np.zeros(len(params), dtype=np.int64)
+    fresh(0, params, pts.x, pts.y, pts.z, pts.nx, pts.ny, pts.nz, pts.pp, pts.npx, EPS, COS_A, counts,
+          np.zeros((0, 0), dtype=np.bool_), False)
+    assert counts.tolist() == compatible_counts("plane", params, pts, epsilon=EPS, cos_alpha=COS_A).tolist()
+    asm = "".join(fresh.inspect_asm().values())
+    assert asm and "gather" not in asm
