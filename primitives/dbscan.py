@@ -512,6 +512,13 @@ def sparse_points(xyz: npt.ArrayLike, mask: npt.ArrayLike, spacing: float, facto
     rows = np.flatnonzero(np.asarray(mask, dtype=bool).reshape(-1))
     if len(rows) == 0 or len(p) <= k:
         return rows[:0].astype(np.int64), 0.0
-    d = cKDTree(p).query(p[rows], k=k + 1)[0][:, k]
-    keep = d >= factor * spacing
-    return rows[keep].astype(np.int64), float(np.median(d[keep])) if keep.any() else 0.0
+    # A bounded query first: a dense point stops at the bound, and only the sparse
+    # points (a minority) need their exact spacing, for the median.
+    tree = cKDTree(p, balanced_tree=False)
+    bound = factor * spacing
+    d = tree.query(p[rows], k=k + 1, distance_upper_bound=bound, workers=-1)[0][:, k]
+    keep = ~(d < bound)
+    if not keep.any():
+        return rows[:0].astype(np.int64), 0.0
+    d_sparse = tree.query(p[rows[keep]], k=k + 1, workers=-1)[0][:, k]
+    return rows[keep].astype(np.int64), float(np.median(d_sparse))

@@ -277,3 +277,25 @@ def test_sparse_points_use_every_point_as_neighbour() -> None:
     assert set(rows.tolist()) == set(range(40_000, 40_400))
     assert 0.4 < med < 1.0
     assert sparse_points(xyz, np.zeros(len(xyz), bool), 0.05, 4.0)[0].size == 0
+
+
+def test_sparse_points_equal_the_unbounded_query() -> None:
+    """The bounded first query changes nothing: rows and median as from every point's
+    exact k-th neighbour distance, also for points whose k-th neighbour lies exactly at
+    factor x spacing (a line of points 0.25 m apart: the 8th neighbour at 1.0 m)."""
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(1)
+    line = np.c_[20.0 + 0.25 * np.arange(100), np.zeros(100), np.zeros(100)]
+    xyz = np.r_[rng.normal(0, 1, (3000, 3)), rng.uniform(-8, 8, (300, 3)), line]
+    mask = rng.random(len(xyz)) < 0.5
+    mask[-100:] = True
+    for spacing, factor in ((0.1, 3.0), (0.5, 2.0), (0.05, 50.0)):
+        rows, med = sparse_points(xyz, mask, spacing, factor)
+        cand = np.flatnonzero(mask)
+        d = cKDTree(xyz).query(xyz[cand], k=9)[0][:, 8]
+        want = cand[d >= factor * spacing]
+        assert np.array_equal(rows, want)
+        if factor * spacing == 1.0:  # the tie: interior points of the line are sparse
+            assert np.isin(np.arange(len(xyz) - 90, len(xyz) - 10), rows).all()
+        assert med == (float(np.median(d[d >= factor * spacing])) if len(want) else 0.0)
