@@ -173,8 +173,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--free-min-points", type=_positive_int, default=200,
                    help="smallest free segment, points (default 200)")
     c.add_argument("--block-points", type=_nonnegative_int, default=0,
-                   help="segment tiles with more points in x-y blocks of at most this many, "
-                        "joined like tiles (default 0 = never)")
+                   help="segment tiles with more points in x-y blocks of at most this many, each a "
+                        "task, joined like tiles (default 0 = never)")
     c.add_argument("--sparse-factor", type=_non_negative, default=2.0,
                    help="segment the unsegmented points at least this many times sparser than the scan once "
                         "more, every distance x (2 x this) (default 2; 0 = one pass)")

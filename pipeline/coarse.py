@@ -44,6 +44,8 @@ from tiling.store import CHUNK_POINTS, RunStore
 __all__ = ["CoarseParams", "PRIMITIVE_CODES", "coarse_tile", "run_coarse", "CoarseReport"]
 
 STAGE = "coarse"
+#: Records of the block tasks of tiles above ``block_points`` (unit ``"<tile>.<block>"``).
+BLOCK_STAGE = "coarse.blocks"
 #: Primitive type codes stored per point (0 = no primitive).
 PRIMITIVE_CODES = {"plane": 1, "sphere": 2, "cylinder": 3, "cone": 4, "torus": 5}
 
@@ -84,11 +86,11 @@ class CoarseParams:
         ``radius_tol`` (relative).
     block_points : int
         A tile with more points is segmented in x-y blocks of at most this many points
-        (each with a margin of context around it), joined like tiles, so that a task's
-        memory follows this bound and not the densest spot of the scan (a tile near a
-        scanner station can hold several times the average). 0 = never (the default:
-        at 1 M-point blocks a 100 M-point run's coarse stage peaked at 2.5 GB per process
-        instead of 6.8 GB but ran about 2.4x slower; docs/method.md).
+        (each with a margin of context around it, each a task of its own), joined like
+        tiles, so that a task's memory follows this bound and not the densest spot of the
+        scan (a tile near a scanner station can hold several times the average). 0 =
+        never, the default: at 100 M points blocks of 1.5 M halved the coarse stage's
+        peak process but doubled its time (docs/method.md, "Blocks inside a dense tile").
     block_margin : float or None
         Context around a block, metres; None = min(the tile buffer, 4 x the DBSCAN eps).
         Dense blocks are small (a 1 M-point block near a station can be 3 x 4 m), so a
@@ -274,42 +276,41 @@ def _join_passes(xyz: np.ndarray, segment: np.ndarray, fits: list[dict[str, Any]
     return segment, [fits[i - 1] for i in live.tolist()]
 
 
-def _segment_tile(xyz: np.ndarray, params: CoarseParams, eps: float, tile: int, margin: float
-                  ) -> tuple[np.ndarray, list[dict[str, Any]], int, int]:
-    """Segment a tile whole, or block by block when it holds more than ``block_points``.
+def _segment_block(xyz: np.ndarray, block_of: np.ndarray, rects: np.ndarray, b: int, params: CoarseParams,
+                   eps: float, tile: int, margin: float) -> dict[str, Any]:
+    """Segment block ``b`` of a tile with the points within ``margin`` around it as context.
 
-    A dense tile (near a scanner station it can hold several times the average) is cut
-    into x-y blocks of at most ``block_points`` points (:func:`primitives.blocks.split_blocks`).
-    Each block is segmented with the points within ``margin`` around it as context, and the blocks' segments are joined over the context points
-    exactly as tiles are joined over their buffers (at least 3 shared points and the same
-    primitive within the tolerances). Returns segment per point, fits per segment, points
-    without a normal and the number of blocks.
+    Returns what the join needs (:func:`_join_blocks`): the block's own rows and their
+    segments, the segmented context rows of other blocks and their segments, the fits and
+    the block's points without a normal.
     """
-    n = len(xyz)
-    cap = params.block_points
-    if not cap or n <= cap:
-        rng = np.random.default_rng(np.random.SeedSequence([params.seed, tile]))
-        seg, fits, no_normal = _segment_points(xyz, params, eps, rng)
-        return seg, fits, int(no_normal.sum()), 1
-    block_of, rects = split_blocks(xyz[:, :2], cap)
-    n_blocks = len(rects)
+    ctx = block_context(xyz, rects[b], margin)
+    rng = np.random.default_rng(np.random.SeedSequence([params.seed, tile, b]))
+    seg, fits, no_normal = _segment_points(xyz[ctx], params, eps, rng)
+    mine = block_of[ctx] == b
+    other = ~mine & (seg > 0)
+    return {"own_rows": ctx[mine], "own_seg": seg[mine], "other_rows": ctx[other], "other_seg": seg[other],
+            "fits": fits, "n_invalid": int(no_normal[mine].sum())}
+
+
+def _join_blocks(n: int, block_of: np.ndarray, results: Sequence[dict[str, Any]], params: CoarseParams
+                 ) -> tuple[np.ndarray, list[dict[str, Any]], int]:
+    """Join the blocks' segments over their context points, as tiles are joined over their
+    buffers (at least 3 shared points and the same primitive within the tolerances).
+    Returns segment per point of the tile, fits per segment and points without a normal."""
+    n_blocks = len(results)
     own = np.zeros(n, dtype=np.int64)  # each point's segment within its own block
     key_base = np.zeros(n_blocks + 1, dtype=np.int64)  # block b's segment s -> key_base[b] + s - 1
     all_fits: list[dict[str, Any]] = []
     shared: list[tuple[np.ndarray, np.ndarray]] = []  # (context key, owner's point index)
     n_invalid = 0
-    for b in range(n_blocks):
-        ctx = block_context(xyz, rects[b], margin)
-        rng = np.random.default_rng(np.random.SeedSequence([params.seed, tile, b]))
-        seg, fits, no_normal = _segment_points(xyz[ctx], params, eps, rng)
-        mine = block_of[ctx] == b
-        n_invalid += int(no_normal[mine].sum())
-        own[ctx[mine]] = seg[mine]
-        key_base[b + 1] = key_base[b] + len(fits)
-        all_fits.extend(fits)
-        other = ~mine & (seg > 0)
-        shared.append((key_base[b] + seg[other] - 1, ctx[other]))
-        del seg, ctx, mine, other, no_normal
+    for b, r in enumerate(results):
+        own[r["own_rows"]] = r["own_seg"]
+        key_base[b + 1] = key_base[b] + len(r["fits"])
+        all_fits.extend(r["fits"])
+        shared.append((key_base[b] + np.asarray(r["other_seg"], dtype=np.int64) - 1,
+                       np.asarray(r["other_rows"], dtype=np.int64)))
+        n_invalid += int(r["n_invalid"])
     n_keys = int(key_base[-1])
     has = own > 0
     own_key = np.where(has, key_base[block_of] + own - 1, -1)
@@ -345,20 +346,109 @@ def _segment_tile(xyz: np.ndarray, params: CoarseParams, eps: float, tile: int, 
         if owned[k]:
             best[root[k]] = k
     fits = [all_fits[int(best[r])] for r in live.tolist()]
-    return segment, fits, n_invalid, n_blocks
+    return segment, fits, n_invalid
 
 
-def coarse_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, int]:
-    """Dask task: segment one tile; write its arrays and table, then its record."""
+def _segment_tile(xyz: np.ndarray, params: CoarseParams, eps: float, tile: int, margin: float
+                  ) -> tuple[np.ndarray, list[dict[str, Any]], int, int]:
+    """Segment a tile whole, or block by block when it holds more than ``block_points``.
+
+    A dense tile (near a scanner station it can hold several times the average) is cut
+    into x-y blocks of at most ``block_points`` points (:func:`primitives.blocks.split_blocks`),
+    each segmented with its context (:func:`_segment_block`) and joined
+    (:func:`_join_blocks`). :func:`run_coarse` runs the blocks of such a tile as tasks of
+    their own (:func:`coarse_block`); this in-process loop gives the same answer. Returns
+    segment per point, fits per segment, points without a normal and the number of blocks.
+    """
+    n = len(xyz)
+    cap = params.block_points
+    if not cap or n <= cap:
+        rng = np.random.default_rng(np.random.SeedSequence([params.seed, tile]))
+        seg, fits, no_normal = _segment_points(xyz, params, eps, rng)
+        return seg, fits, int(no_normal.sum()), 1
+    block_of, rects = split_blocks(xyz[:, :2], cap)
+    results = [_segment_block(xyz, block_of, rects, b, params, eps, tile, margin) for b in range(len(rects))]
+    segment, fits, n_invalid = _join_blocks(n, block_of, results, params)
+    return segment, fits, n_invalid, len(rects)
+
+
+def _margin(store: RunStore, cfg: dict[str, Any], params: CoarseParams) -> float:
+    return (min(float(store.attrs["grid"]["buffer"]), 4.0 * float(cfg["eps"]))
+            if params.block_margin is None else float(params.block_margin))
+
+
+def _block_results_path(tile: int, b: int) -> tuple[str, str]:
+    return f"coarse/blocks/{tile}/{b}", f"coarse/block_fits/{tile}/{b}.parquet"
+
+
+def coarse_block(url: str, tile: int, b: int, cfg: dict[str, Any]) -> dict[str, Any]:
+    """Dask task: segment block ``b`` of a tile above ``block_points``; write what the
+    tile's join needs (``coarse/blocks/<tile>/<b>``, ``coarse/block_fits/<tile>/<b>.parquet``),
+    then its record. The block split is recomputed from the tile's points (the same split
+    in every task: :func:`primitives.blocks.split_blocks` is deterministic)."""
+    store = RunStore.open(url, mode="a")
+    params = CoarseParams.from_dict(cfg["params"])
+    scale = np.asarray(store.attrs["coords"]["scale"])
+    xyz = _tile_points(store, tile, scale)["local"]
+    block_of, rects = split_blocks(xyz[:, :2], params.block_points)
+    r = _segment_block(xyz, block_of, rects, b, params, cfg["eps"], tile, _margin(store, cfg, params))
+    arrays, table = _block_results_path(tile, b)
+    store.write_unit(arrays, {"own_rows": r["own_rows"].astype(np.int64), "own_seg": r["own_seg"].astype(np.int32),
+                              "other_rows": r["other_rows"].astype(np.int64),
+                              "other_seg": r["other_seg"].astype(np.int32)})
+    _write_table(store, table, pa.table({"kind": [f["kind"] for f in r["fits"]],
+                                         "params": [f["params"] for f in r["fits"]],
+                                         "rms": [float(f["rms"]) for f in r["fits"]]},
+                                        schema=_FIT_SCHEMA))
+    info = {"params_hash": cfg["params_hash"], "n_blocks": len(rects), "n_own": int(len(r["own_rows"])),
+            "n_fits": len(r["fits"]), "n_invalid": r["n_invalid"]}
+    store.record(BLOCK_STAGE, f"{tile}.{b}", info)
+    return info
+
+
+def count_blocks(url: str, tile: int, cfg: dict[str, Any]) -> int:
+    """Dask task: the number of blocks of a tile above ``block_points``."""
+    store = RunStore.open(url)
+    params = CoarseParams.from_dict(cfg["params"])
+    raw = store.read_unit(f"tiles/{tile}", ["xyz"])["xyz"]
+    scale = np.asarray(store.attrs["coords"]["scale"])
+    return len(split_blocks(raw[:, :2].astype(np.float64) * scale[:2], params.block_points)[1])
+
+
+def _coarse_unit(url: str, tile: int, b: int, cfg: dict[str, Any]) -> dict[str, Any]:
+    """Dask task of the stage's first round: block ``b`` of a tile, or (``b`` < 0) a whole tile."""
+    return coarse_tile(url, tile, cfg) if b < 0 else coarse_block(url, tile, b, cfg)
+
+
+def _read_block_results(store: RunStore, tile: int, n_blocks: int) -> list[dict[str, Any]]:
+    out = []
+    recs = store.records(BLOCK_STAGE)
+    for b in range(n_blocks):
+        arrays, table = _block_results_path(tile, b)
+        r: dict[str, Any] = dict(store.read_unit(arrays))
+        t = _read_table(store, table).to_pydict()
+        r["fits"] = [{"kind": k, "params": p, "rms": float(x)}
+                     for k, p, x in zip(t["kind"], t["params"], t["rms"], strict=True)]
+        r["n_invalid"] = int(recs[f"{tile}.{b}"]["n_invalid"])
+        out.append(r)
+    return out
+
+
+def coarse_tile(url: str, tile: int, cfg: dict[str, Any], n_blocks: int = 0) -> dict[str, int]:
+    """Dask task: segment one tile (or, with ``n_blocks``, join the results of its block
+    tasks, :func:`coarse_block`); write its arrays and table, then its record."""
     store = RunStore.open(url, mode="a")
     params = CoarseParams.from_dict(cfg["params"])
     scale = np.asarray(store.attrs["coords"]["scale"])
     offset = np.asarray(store.attrs["coords"]["offset"])
-    margin = (min(float(store.attrs["grid"]["buffer"]), 4.0 * float(cfg["eps"]))
-              if params.block_margin is None else float(params.block_margin))
     d = _tile_points(store, tile, scale)
     xyz, n = d["local"], len(d["local"])
-    segment, fits, n_invalid, n_blocks = _segment_tile(xyz, params, cfg["eps"], tile, margin)
+    from_tasks = bool(n_blocks)
+    if from_tasks:
+        block_of, _ = split_blocks(xyz[:, :2], params.block_points)
+        segment, fits, n_invalid = _join_blocks(n, block_of, _read_block_results(store, tile, n_blocks), params)
+    else:
+        segment, fits, n_invalid, n_blocks = _segment_tile(xyz, params, cfg["eps"], tile, _margin(store, cfg, params))
     has = segment > 0
     kinds = np.array([0] + [PRIMITIVE_CODES.get(f["kind"], 0) for f in fits], dtype=np.uint8)  # free: 0
     primitive = kinds[segment]
@@ -411,8 +501,15 @@ def coarse_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, int]:
         "n_contacts": n_contacts,
     }
     store.record(STAGE, str(tile), info)
+    if from_tasks:  # the blocks' results are in the tile's arrays now
+        store.delete(f"coarse/blocks/{tile}")
+        fs, root = _fs(store)
+        if fs.exists(f"{root}/coarse/block_fits/{tile}"):
+            fs.rm(f"{root}/coarse/block_fits/{tile}", recursive=True)
     return info
 
+
+_FIT_SCHEMA = pa.schema([("kind", pa.string()), ("params", pa.string()), ("rms", pa.float64())])
 
 _TABLE_SCHEMA = pa.schema([
     ("tile", pa.int64()), ("segment", pa.int64()), ("kind", pa.string()), ("params", pa.string()),
@@ -786,9 +883,22 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     stages = attrs.get("stages", {})
     if stages.get(STAGE, {}).get("params_hash") not in (None, h):
         store.clear_records(STAGE)  # other parameters: every tile is redone
+        store.clear_records(BLOCK_STAGE)
     done = {k for k, v in store.records(STAGE).items() if v.get("params_hash") == h}
     todo = [t for t in tiles if str(t) not in done]
-    runner(coarse_tile, [(url, t, cfg) for t in todo], "coarse: tiles")
+    # Tiles above block_points are cut into blocks, each a task of its own, so that the
+    # densest tile neither holds one worker for most of the stage nor sets its memory;
+    # a second round joins each such tile's blocks. Largest units first.
+    size = {t: int(done_ingest[str(t)].get("n_points", 0)) for t in todo}
+    big = [t for t in todo if params.block_points and size[t] > params.block_points]
+    n_blocks = dict(zip(big, runner(count_blocks, [(url, t, cfg) for t in big], "coarse: blocks"), strict=True))
+    blocks_done = {k for k, v in store.records(BLOCK_STAGE).items() if v.get("params_hash") == h}
+    units = [(size[t], t, -1) for t in todo if t not in n_blocks]
+    units += [(size[t] / n_blocks[t], t, b) for t in big for b in range(n_blocks[t]) if f"{t}.{b}" not in blocks_done]
+    units.sort(key=lambda u: -u[0])
+    runner(_coarse_unit, [(url, t, b, cfg) for _, t, b in units], "coarse: tiles")
+    if big:
+        runner(coarse_tile, [(url, t, cfg, n_blocks[t]) for t in big], "coarse: joins")
     previous = stages.get(STAGE, {})
     if not todo and previous.get("params_hash") == h and "n_tile_segments" in previous:
         n_segments, n_keys = int(previous["n_segments"]), int(previous["n_tile_segments"])  # stitched before

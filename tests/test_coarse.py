@@ -209,3 +209,27 @@ def test_sparse_part_of_a_plane_joins_its_dense_part():
     main_near = np.bincount(seg[: len(near)][seg[: len(near)] > 0]).argmax()
     assert (seg[len(near):] == main_near).mean() > 0.8
     assert fits[main_near - 1]["kind"] == "plane"
+
+
+def test_block_tasks_equal_the_in_process_blocks(scan, tmp_path):
+    """run_coarse runs the blocks of a dense tile as tasks of their own and joins them in a
+    second round: the tile's segments equal those of the in-process loop, point by point,
+    and the blocks' intermediate results are gone once the tile is recorded."""
+    from pipeline.coarse import BLOCK_STAGE, _margin, _segment_tile, _tile_points
+
+    store_path = tmp_path / "s"
+    _segment(scan, store_path, 500.0, CoarseParams(eps=0.3, block_points=8_000))
+    s = RunStore.open(store_path)
+    stage = s.attrs["stages"]["coarse"]
+    params = CoarseParams.from_dict(stage["params"])
+    cfg = {"eps": stage["eps"]}
+    recs = s.records("coarse")
+    blocked = [int(t) for t, r in recs.items() if r["n_blocks"] > 1]
+    assert blocked
+    assert len(s.records(BLOCK_STAGE)) == sum(recs[str(t)]["n_blocks"] for t in blocked)
+    for t in blocked:
+        xyz = _tile_points(s, t, np.asarray(s.attrs["coords"]["scale"]))["local"]
+        seg, _, _, n_blocks = _segment_tile(xyz, params, cfg["eps"], t, _margin(s, cfg, params))
+        assert n_blocks == recs[str(t)]["n_blocks"]
+        assert np.array_equal(s.read_unit(f"coarse/tiles/{t}", ["segment"])["segment"], seg)
+        assert not s.has(f"coarse/blocks/{t}")
