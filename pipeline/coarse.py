@@ -886,9 +886,9 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
         store.clear_records(BLOCK_STAGE)
     done = {k for k, v in store.records(STAGE).items() if v.get("params_hash") == h}
     todo = [t for t in tiles if str(t) not in done]
-    # Tiles above block_points are cut into blocks, each a task of its own, so that the
-    # densest tile neither holds one worker for most of the stage nor sets its memory;
-    # a second round joins each such tile's blocks. Largest units first.
+    # Tiles above block_points are cut into blocks, each a task of its own, so that a
+    # task's memory follows block_points rather than the densest tile; a second round
+    # joins each such tile's blocks. Largest units first (the longest tasks start first).
     size = {t: int(done_ingest[str(t)].get("n_points", 0)) for t in todo}
     big = [t for t in todo if params.block_points and size[t] > params.block_points]
     n_blocks = dict(zip(big, runner(count_blocks, [(url, t, cfg) for t in big], "coarse: blocks"), strict=True))
