@@ -172,9 +172,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="leave points that no primitive explains unsegmented (default: DBSCAN them too)")
     c.add_argument("--free-min-points", type=_positive_int, default=200,
                    help="smallest free segment, points (default 200)")
-    c.add_argument("--block-points", type=_nonnegative_int, default=0,
+    c.add_argument("--block-points", type=_nonnegative_int, default=1_500_000,
                    help="segment tiles with more points in x-y blocks of at most this many, each a "
-                        "task, joined like tiles (default 0 = never)")
+                        "task, joined like tiles (default 1,500,000; 0 = never)")
+    c.add_argument("--block-margin", type=_float, default=None,
+                   help="context around a block, metres (default: min(buffer, 2 x eps))")
     c.add_argument("--sparse-factor", type=_non_negative, default=2.0,
                    help="segment the unsegmented points at least this many times sparser than the scan once "
                         "more, every distance x (2 x this) (default 2; 0 = one pass)")
@@ -205,6 +207,9 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--threshold", type=_float, help="keep a split when xi >= this (default: the fitted model's)")
     tr.add_argument("--batch-points", type=_positive_int, default=1_000_000,
                     help="points per task; small segments are batched (default 1,000,000)")
+    tr.add_argument("--max-group-points", type=_nonnegative_int, default=1_000_000,
+                    help="build the tree of a larger element group on a seeded sample of this many points; "
+                         "its points take their nearest sampled point's labels (default 1,000,000; 0 = never)")
     tr.add_argument("--weights", help="HollowNet weights (default: the shipped ones)")
     tr.add_argument("--seed", type=int, default=0)
     tr.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process")
@@ -292,7 +297,7 @@ def _cmd_tree(args: argparse.Namespace) -> int:
 
     RunStore.open(args.store)
     params = TreeStageParams(max_depth=args.max_depth, threshold=args.threshold, batch_points=args.batch_points,
-                             weights=args.weights, seed=args.seed)
+                             weights=args.weights, seed=args.seed, max_group_points=args.max_group_points)
     with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
         report = run_tree(args.store, params, runner=run)
     print(report.summary())
@@ -415,7 +420,8 @@ def _cmd_coarse(args: argparse.Namespace) -> int:
         ransac=RansacParams(epsilon=args.epsilon, alpha_deg=args.alpha, min_support=args.min_support),
         cluster_epsilon=args.cluster_epsilon, eps=args.eps, min_samples=args.min_samples, seed=args.seed,
         free_segments=not args.no_free_segments, free_min_points=args.free_min_points,
-        block_points=args.block_points, sparse_factor=args.sparse_factor, group_gap=args.group_gap,
+        block_points=args.block_points, block_margin=args.block_margin, sparse_factor=args.sparse_factor,
+        group_gap=args.group_gap,
     )
     with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
         report = run_coarse(args.store, params, runner=run)

@@ -46,6 +46,8 @@ __all__ = ["CoarseParams", "PRIMITIVE_CODES", "coarse_tile", "run_coarse", "Coar
 STAGE = "coarse"
 #: Records of the block tasks of tiles above ``block_points`` (unit ``"<tile>.<block>"``).
 BLOCK_STAGE = "coarse.blocks"
+#: Records of the tiles cut into blocks (:func:`plan_blocks`; unit ``"<tile>"``).
+PLAN_STAGE = "coarse.plan"
 #: Primitive type codes stored per point (0 = no primitive).
 PRIMITIVE_CODES = {"plane": 1, "sphere": 2, "cylinder": 3, "cone": 4, "torus": 5}
 
@@ -89,12 +91,13 @@ class CoarseParams:
         (each with a margin of context around it, each a task of its own), joined like
         tiles, so that a task's memory follows this bound and not the densest spot of the
         scan (a tile near a scanner station can hold several times the average). 0 =
-        never, the default: at 100 M points blocks of 1.5 M halved the coarse stage's
-        peak process but doubled its time (docs/method.md, "Blocks inside a dense tile").
+        never. Default 1.5 M (docs/method.md, "Blocks inside a dense tile").
     block_margin : float or None
-        Context around a block, metres; None = min(the tile buffer, 4 x the DBSCAN eps).
+        Context around a block, metres; None = min(the tile buffer, 2 x the DBSCAN eps).
         Dense blocks are small (a 1 M-point block near a station can be 3 x 4 m), so a
-        margin as wide as the tile buffer would multiply the points each block processes.
+        margin as wide as the tile buffer would multiply the points each block processes;
+        one eps was measured too narrow (the join missed, adjusted Rand index 0.70 against
+        whole tiles), two eps enough (0.9995).
     sparse_factor : float
         Sparse second pass (docs/method.md): the points the first pass leaves unsegmented
         whose spacing (to their 8th-nearest neighbour among all points) is at least this many
@@ -126,7 +129,7 @@ class CoarseParams:
     angle_tol_deg: float = 10.0
     distance_tol: float = 0.15
     radius_tol: float = 0.15
-    block_points: int = 0
+    block_points: int = 1_500_000
     block_margin: float | None = None
     sparse_factor: float = 2.0
     group_gap: float = 0.6
@@ -276,21 +279,33 @@ def _join_passes(xyz: np.ndarray, segment: np.ndarray, fits: list[dict[str, Any]
     return segment, [fits[i - 1] for i in live.tolist()]
 
 
-def _segment_block(xyz: np.ndarray, block_of: np.ndarray, rects: np.ndarray, b: int, params: CoarseParams,
-                   eps: float, tile: int, margin: float) -> dict[str, Any]:
-    """Segment block ``b`` of a tile with the points within ``margin`` around it as context.
+def _segment_block(xyz: np.ndarray, rows: np.ndarray, mine: np.ndarray, b: int, params: CoarseParams,
+                   eps: float, tile: int) -> dict[str, Any]:
+    """Segment block ``b`` of a tile with the points within its margin as context.
 
-    Returns what the join needs (:func:`_join_blocks`): the block's own rows and their
-    segments, the segmented context rows of other blocks and their segments, the fits and
-    the block's points without a normal.
+    ``xyz`` are the context's points (store-local metres), ``rows`` their tile rows and
+    ``mine`` which of them block ``b`` owns (:func:`_block_inputs`). Returns what the join
+    needs (:func:`_join_blocks`): the block's own rows and their segments, the segmented
+    context rows of other blocks and their segments, the fits and the block's points
+    without a normal.
     """
-    ctx = block_context(xyz, rects[b], margin)
     rng = np.random.default_rng(np.random.SeedSequence([params.seed, tile, b]))
-    seg, fits, no_normal = _segment_points(xyz[ctx], params, eps, rng)
-    mine = block_of[ctx] == b
+    seg, fits, no_normal = _segment_points(xyz, params, eps, rng)
     other = ~mine & (seg > 0)
-    return {"own_rows": ctx[mine], "own_seg": seg[mine], "other_rows": ctx[other], "other_seg": seg[other],
+    return {"own_rows": rows[mine], "own_seg": seg[mine], "other_rows": rows[other], "other_seg": seg[other],
             "fits": fits, "n_invalid": int(no_normal[mine].sum())}
+
+
+def _block_inputs(xy: np.ndarray, cap: int, margin: float) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
+    """The blocks of a tile (:func:`primitives.blocks.split_blocks`) and, for each, its
+    context: the tile rows within ``margin`` of the block's rectangle and which of them
+    the block owns. Returns ``block_of`` per point and ``[(rows, mine), ...]`` per block."""
+    block_of, rects = split_blocks(xy, cap)
+    out = []
+    for b in range(len(rects)):
+        ctx = block_context(xy, rects[b], margin)
+        out.append((ctx, block_of[ctx] == b))
+    return block_of, out
 
 
 def _join_blocks(n: int, block_of: np.ndarray, results: Sequence[dict[str, Any]], params: CoarseParams
@@ -366,14 +381,14 @@ def _segment_tile(xyz: np.ndarray, params: CoarseParams, eps: float, tile: int, 
         rng = np.random.default_rng(np.random.SeedSequence([params.seed, tile]))
         seg, fits, no_normal = _segment_points(xyz, params, eps, rng)
         return seg, fits, int(no_normal.sum()), 1
-    block_of, rects = split_blocks(xyz[:, :2], cap)
-    results = [_segment_block(xyz, block_of, rects, b, params, eps, tile, margin) for b in range(len(rects))]
+    block_of, inputs = _block_inputs(xyz[:, :2], cap, margin)
+    results = [_segment_block(xyz[rows], rows, mine, b, params, eps, tile) for b, (rows, mine) in enumerate(inputs)]
     segment, fits, n_invalid = _join_blocks(n, block_of, results, params)
-    return segment, fits, n_invalid, len(rects)
+    return segment, fits, n_invalid, len(inputs)
 
 
 def _margin(store: RunStore, cfg: dict[str, Any], params: CoarseParams) -> float:
-    return (min(float(store.attrs["grid"]["buffer"]), 4.0 * float(cfg["eps"]))
+    return (min(float(store.attrs["grid"]["buffer"]), 2.0 * float(cfg["eps"]))
             if params.block_margin is None else float(params.block_margin))
 
 
@@ -381,17 +396,36 @@ def _block_results_path(tile: int, b: int) -> tuple[str, str]:
     return f"coarse/blocks/{tile}/{b}", f"coarse/block_fits/{tile}/{b}.parquet"
 
 
+def plan_blocks(url: str, tile: int, cfg: dict[str, Any]) -> int:
+    """Dask task: cut a tile above ``block_points`` into blocks, once. Writes each block's
+    input (``coarse/block_input/<tile>/<b>``: the tile rows of its context, which of them
+    it owns and their stored coordinates) and the block of every tile row
+    (``coarse/block_of/<tile>``, for the join), then its record; returns the number of
+    blocks. A block task then reads only its own context, not the whole tile."""
+    store = RunStore.open(url, mode="a")
+    params = CoarseParams.from_dict(cfg["params"])
+    raw = store.read_unit(f"tiles/{tile}", ["xyz"])["xyz"]
+    scale = np.asarray(store.attrs["coords"]["scale"])
+    block_of, inputs = _block_inputs(raw[:, :2].astype(np.float64) * scale[:2], params.block_points,
+                                     _margin(store, cfg, params))
+    for b, (rows, mine) in enumerate(inputs):
+        store.write_unit(f"coarse/block_input/{tile}/{b}", {"rows": rows, "mine": mine, "xyz": raw[rows]})
+    store.write_unit(f"coarse/block_of/{tile}", {"block_of": block_of.astype(np.int32)})
+    store.record(PLAN_STAGE, str(tile), {"params_hash": cfg["params_hash"], "n_blocks": len(inputs),
+                                         "n_context": int(sum(len(r) for r, _ in inputs))})
+    return len(inputs)
+
+
 def coarse_block(url: str, tile: int, b: int, cfg: dict[str, Any]) -> dict[str, Any]:
-    """Dask task: segment block ``b`` of a tile above ``block_points``; write what the
-    tile's join needs (``coarse/blocks/<tile>/<b>``, ``coarse/block_fits/<tile>/<b>.parquet``),
-    then its record. The block split is recomputed from the tile's points (the same split
-    in every task: :func:`primitives.blocks.split_blocks` is deterministic)."""
+    """Dask task: segment block ``b`` of a tile above ``block_points`` from its input
+    (:func:`plan_blocks`); write what the tile's join needs (``coarse/blocks/<tile>/<b>``,
+    ``coarse/block_fits/<tile>/<b>.parquet``), then its record."""
     store = RunStore.open(url, mode="a")
     params = CoarseParams.from_dict(cfg["params"])
     scale = np.asarray(store.attrs["coords"]["scale"])
-    xyz = _tile_points(store, tile, scale)["local"]
-    block_of, rects = split_blocks(xyz[:, :2], params.block_points)
-    r = _segment_block(xyz, block_of, rects, b, params, cfg["eps"], tile, _margin(store, cfg, params))
+    d = store.read_unit(f"coarse/block_input/{tile}/{b}")
+    # The same conversion as the tile's (_tile_points): the same metres, the same answer.
+    r = _segment_block(d["xyz"].astype(np.float64) * scale, d["rows"], d["mine"], b, params, cfg["eps"], tile)
     arrays, table = _block_results_path(tile, b)
     store.write_unit(arrays, {"own_rows": r["own_rows"].astype(np.int64), "own_seg": r["own_seg"].astype(np.int32),
                               "other_rows": r["other_rows"].astype(np.int64),
@@ -400,19 +434,10 @@ def coarse_block(url: str, tile: int, b: int, cfg: dict[str, Any]) -> dict[str, 
                                          "params": [f["params"] for f in r["fits"]],
                                          "rms": [float(f["rms"]) for f in r["fits"]]},
                                         schema=_FIT_SCHEMA))
-    info = {"params_hash": cfg["params_hash"], "n_blocks": len(rects), "n_own": int(len(r["own_rows"])),
+    info = {"params_hash": cfg["params_hash"], "n_own": int(len(r["own_rows"])), "n_context": int(len(d["rows"])),
             "n_fits": len(r["fits"]), "n_invalid": r["n_invalid"]}
     store.record(BLOCK_STAGE, f"{tile}.{b}", info)
     return info
-
-
-def count_blocks(url: str, tile: int, cfg: dict[str, Any]) -> int:
-    """Dask task: the number of blocks of a tile above ``block_points``."""
-    store = RunStore.open(url)
-    params = CoarseParams.from_dict(cfg["params"])
-    raw = store.read_unit(f"tiles/{tile}", ["xyz"])["xyz"]
-    scale = np.asarray(store.attrs["coords"]["scale"])
-    return len(split_blocks(raw[:, :2].astype(np.float64) * scale[:2], params.block_points)[1])
 
 
 def _coarse_unit(url: str, tile: int, b: int, cfg: dict[str, Any]) -> dict[str, Any]:
@@ -445,7 +470,7 @@ def coarse_tile(url: str, tile: int, cfg: dict[str, Any], n_blocks: int = 0) -> 
     xyz, n = d["local"], len(d["local"])
     from_tasks = bool(n_blocks)
     if from_tasks:
-        block_of, _ = split_blocks(xyz[:, :2], params.block_points)
+        block_of = store.read_unit(f"coarse/block_of/{tile}")["block_of"].astype(np.int64)
         segment, fits, n_invalid = _join_blocks(n, block_of, _read_block_results(store, tile, n_blocks), params)
     else:
         segment, fits, n_invalid, n_blocks = _segment_tile(xyz, params, cfg["eps"], tile, _margin(store, cfg, params))
@@ -501,8 +526,9 @@ def coarse_tile(url: str, tile: int, cfg: dict[str, Any], n_blocks: int = 0) -> 
         "n_contacts": n_contacts,
     }
     store.record(STAGE, str(tile), info)
-    if from_tasks:  # the blocks' results are in the tile's arrays now
-        store.delete(f"coarse/blocks/{tile}")
+    if from_tasks:  # the blocks' inputs and results are in the tile's arrays now
+        for group in ("blocks", "block_input", "block_of"):
+            store.delete(f"coarse/{group}/{tile}")
         fs, root = _fs(store)
         if fs.exists(f"{root}/coarse/block_fits/{tile}"):
             fs.rm(f"{root}/coarse/block_fits/{tile}", recursive=True)
@@ -884,6 +910,7 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     if stages.get(STAGE, {}).get("params_hash") not in (None, h):
         store.clear_records(STAGE)  # other parameters: every tile is redone
         store.clear_records(BLOCK_STAGE)
+        store.clear_records(PLAN_STAGE)
     done = {k for k, v in store.records(STAGE).items() if v.get("params_hash") == h}
     todo = [t for t in tiles if str(t) not in done]
     # Tiles above block_points are cut into blocks, each a task of its own, so that a
@@ -891,7 +918,11 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     # joins each such tile's blocks. Largest units first (the longest tasks start first).
     size = {t: int(done_ingest[str(t)].get("n_points", 0)) for t in todo}
     big = [t for t in todo if params.block_points and size[t] > params.block_points]
-    n_blocks = dict(zip(big, runner(count_blocks, [(url, t, cfg) for t in big], "coarse: blocks"), strict=True))
+    planned = {k: int(v["n_blocks"]) for k, v in store.records(PLAN_STAGE).items() if v.get("params_hash") == h}
+    n_blocks = {t: planned[str(t)] for t in big if str(t) in planned}
+    unplanned = sorted((t for t in big if t not in n_blocks), key=lambda t: -size[t])
+    n_blocks.update(zip(unplanned, runner(plan_blocks, [(url, t, cfg) for t in unplanned], "coarse: blocks"),
+                        strict=True))
     blocks_done = {k for k, v in store.records(BLOCK_STAGE).items() if v.get("params_hash") == h}
     units = [(size[t], t, -1) for t in todo if t not in n_blocks]
     units += [(size[t] / n_blocks[t], t, b) for t in big for b in range(n_blocks[t]) if f"{t}.{b}" not in blocks_done]

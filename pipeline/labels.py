@@ -66,7 +66,11 @@ def _tree_values(store: RunStore, pos: np.ndarray, tree: dict[str, Any]) -> dict
         local = pos[sel] - start
         if (local >= stop - start).any():
             raise PipelineError(f"store {store.url}: tree batch {b} does not cover CSR rows it should")
-        arrays = store.read_unit(f"tree/batches/{b}", ["leaf", "class", "instance", "score"])
+        # Only the rows this tile touches: a batch of one large group (a ground plane) can
+        # hold tens of millions of rows, and every tile it crosses reads from it.
+        lo, hi = int(local.min()), int(local.max()) + 1
+        arrays = {k: store.read_slice(f"tree/batches/{b}/{k}", lo, hi) for k in ("leaf", "class", "instance", "score")}
+        local = local - lo
         out["leaf"][sel] = arrays["leaf"][local]
         out["class"][sel] = arrays["class"][local]
         inst = arrays["instance"][local].astype(np.int64)

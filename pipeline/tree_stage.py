@@ -66,6 +66,11 @@ class TreeStageParams:
         A leaf classed ground or roof is roof when its median height above the local
         ground (``tree/ground.py``) is at least this many metres, else ground; None keeps
         HollowNet's class.
+    max_group_points : int
+        An element group with more points (a ground plane of a large scan can hold 40 %
+        of it) builds its tree on a seeded random sample of about this many points, and
+        each of its points takes the labels of its nearest sampled point, so a task's
+        memory follows this bound rather than the scan; 0 = never sample.
     """
 
     max_depth: int = 3
@@ -74,12 +79,17 @@ class TreeStageParams:
     weights: str | None = None
     seed: int = 0
     roof_min_height: float | None = 1.5
+    max_group_points: int = 1_000_000
 
     def __post_init__(self) -> None:
         if not (isinstance(self.max_depth, int) and self.max_depth >= 0):
             raise ConfigError(f"The 'max_depth' parameter of tree must be an int >= 0. Got {self.max_depth!r} instead.")
         if not (isinstance(self.batch_points, int) and self.batch_points >= 1):
             raise ConfigError(f"The 'batch_points' parameter of tree must be an int >= 1. Got {self.batch_points!r} instead.")
+        if isinstance(self.max_group_points, bool) or not isinstance(self.max_group_points, int) \
+                or self.max_group_points < 0:
+            raise ConfigError(f"The 'max_group_points' parameter of tree must be an int >= 0. "
+                              f"Got {self.max_group_points!r} instead.")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -87,7 +97,8 @@ class TreeStageParams:
     @classmethod
     def from_workflow(cls, section: Any) -> TreeStageParams:
         return cls(max_depth=section.max_depth, threshold=section.threshold, batch_points=section.batch_points,
-                   weights=section.weights, seed=section.seed, roof_min_height=section.roof_min_height)
+                   weights=section.weights, seed=section.seed, roof_min_height=section.roof_min_height,
+                   max_group_points=section.max_group_points)
 
 
 def plan_batches(offsets: np.ndarray, batch_points: int) -> list[tuple[int, int]]:
@@ -141,6 +152,82 @@ def group_starts(store: RunStore) -> np.ndarray:
     return np.r_[np.flatnonzero(np.r_[True, grp[1:] != grp[:-1]]), n].astype(np.int64)
 
 
+def _group_tree(pts: np.ndarray, s: int, params: TreeStageParams, clf: Any, ground_level: float | None,
+                n_inst: int) -> tuple[dict[str, np.ndarray], dict[str, list[Any]], int]:
+    """The tree of one element group (its points ``pts``, store-local metres; ``s``: its
+    first segment, 0-based): per-point leaf, class, instance (numbered from ``n_inst + 1``)
+    and score, the node table's columns and the new instance count."""
+    from tree.build import build_tree
+    from tree.ground import ground_or_roof
+
+    center = pts.mean(axis=0)
+    res = build_tree(pts - center, clf, max_depth=params.max_depth, threshold=params.threshold,
+                     rng=np.random.SeedSequence([params.seed, s + 1]))
+    if params.roof_min_height is not None and ground_level is not None:
+        res_class = ground_or_roof(res.class_id, pts[:, 2], res.leaf, ground_level, params.roof_min_height)
+    else:
+        res_class = res.class_id
+    inst = np.where(res.instance > 0, res.instance + n_inst, 0).astype(np.uint32)
+    node_inst = np.zeros(len(res.nodes), np.int64)
+    node_inst[res.instance_node] = np.arange(1, len(res.instance_node) + 1) + n_inst
+    n_inst += len(res.instance_node)
+    # Planar classes are one instance per class and element group (one tree; METHOD.md, "Classes").
+    planar = np.isin(res_class, _PLANAR) & (res.instance == 0)
+    for c in np.unique(res_class[planar]).tolist():
+        n_inst += 1
+        inst[planar & (res_class == c)] = n_inst
+    d = res.nodes.to_dict()
+    m = len(res.nodes)
+    cols: dict[str, list[Any]] = {"segment": [s + 1] * m}
+    for c in _NODE_COLUMNS[1:]:
+        if c == "instance":
+            cols[c] = node_inst.tolist()
+        elif c in ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax"):
+            j = ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax").index(c)
+            cols[c] = (res.nodes.bbox[:, j] + center[j % 3]).tolist()
+        else:
+            cols[c] = np.asarray(d[c]).tolist()
+    values = {"leaf": res.leaf.astype(np.uint64), "class": res_class.astype(np.uint8), "instance": inst,
+              "score": res.score.astype(np.float32)}
+    return values, cols, n_inst
+
+
+def _sampled_group_tree(store: RunStore, b: int, lo: int, hi: int, s: int, scale: np.ndarray,
+                        params: TreeStageParams, clf: Any, ground_level: float | None) -> tuple[dict[str, list[Any]], int]:
+    """The tree of one element group above ``max_group_points``, in bounded memory: built
+    on a seeded random sample of about ``max_group_points`` of its points (read chunk by
+    chunk), then every point takes the labels of its nearest sampled point, written chunk
+    by chunk. The node table's ``n_points`` count all the group's points; its bounding
+    boxes are the sample's. Returns the node columns and the instance count."""
+    from scipy.spatial import cKDTree
+
+    n = hi - lo
+    step = max(params.max_group_points, 1_000_000)
+    rng = np.random.default_rng(np.random.SeedSequence([params.seed, s + 1, 1]))
+    keep = params.max_group_points / n
+    parts = []
+    for a in range(lo, hi, step):
+        chunk = store.read_slice("coarse/csr/xyz", a, min(a + step, hi))
+        parts.append(chunk[rng.random(len(chunk)) < keep])
+    sample = np.concatenate(parts).astype(np.float64) * scale
+    values, cols, n_inst = _group_tree(sample, s, params, clf, ground_level, 0)
+    kd = cKDTree(sample, balanced_tree=False)
+    n_leaf = np.zeros(len(cols["node_id"]), np.int64)
+    writer = store.unit_writer(f"tree/batches/{b}", n_rows=n)
+    for a in range(lo, hi, step):
+        pts = store.read_slice("coarse/csr/xyz", a, min(a + step, hi)).astype(np.float64) * scale
+        _, j = kd.query(pts, workers=-1)
+        writer.append({k: v[j] for k, v in values.items()})
+        n_leaf += np.bincount(values["leaf"][j].astype(np.int64), minlength=len(n_leaf))
+    writer.close(values)
+    # Every node counts the group's points in its leaves (children come after their parent).
+    parent = np.asarray(cols["parent"], dtype=np.int64)
+    for k in range(len(parent) - 1, 0, -1):
+        n_leaf[parent[k]] += n_leaf[k]
+    cols["n_points"] = n_leaf.tolist()
+    return cols, n_inst
+
+
 def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
                ground: np.ndarray | None = None, starts: list[int] | None = None) -> dict[str, Any]:
     """Dask task: the trees of global segments ``segs[0] + 1 .. segs[1]`` (one batch).
@@ -149,61 +236,42 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
     per group, built on the points of all its segments); None = one tree per segment.
     ``ground``: the local ground level of each of these segments, in the store's
     coordinates (``tree.ground.ground_levels``); used when ``roof_min_height`` is set
-    (a group takes its segments' lowest).
+    (a group takes its segments' lowest). A batch of one group above ``max_group_points``
+    is built on a sample of it (:func:`_sampled_group_tree`).
     """
     from hollownet.predict import Classifier
-    from tree.build import build_tree
-    from tree.ground import ground_or_roof
 
     store = RunStore.open(url, mode="a")
     params = TreeStageParams(**cfg["params"])
     scale = np.asarray(store.attrs["coords"]["scale"])
     offsets = store.read_unit("coarse/csr", ["offsets"])["offsets"]
     lo, hi = int(offsets[segs[0]]), int(offsets[segs[1]])
-    xyz = store.read_slice("coarse/csr/xyz", lo, hi).astype(np.float64) * scale
     n = hi - lo
-    leaf = np.zeros(n, np.uint64)
-    cls = np.zeros(n, np.uint8)
-    inst = np.zeros(n, np.uint32)
-    score = np.zeros(n, np.float32)
     clf = Classifier.get(params.weights, num_threads=_worker_threads())
-    cols: dict[str, list[Any]] = {c: [] for c in _NODE_COLUMNS}
-    n_inst = 0
     bounds = list(range(segs[0], segs[1] + 1)) if starts is None else [*starts, segs[1]]
-    for s, s_end in zip(bounds[:-1], bounds[1:], strict=True):
-        a, z = int(offsets[s]) - lo, int(offsets[s_end]) - lo
-        pts = xyz[a:z]
-        res = build_tree(pts - pts.mean(axis=0), clf, max_depth=params.max_depth, threshold=params.threshold,
-                         rng=np.random.SeedSequence([params.seed, s + 1]))
-        leaf[a:z] = res.leaf
-        if params.roof_min_height is not None and ground is not None:
-            res_class = ground_or_roof(res.class_id, pts[:, 2], res.leaf,
-                                       float(np.min(ground[s - segs[0]:s_end - segs[0]])), params.roof_min_height)
-        else:
-            res_class = res.class_id
-        cls[a:z] = res_class
-        inst[a:z] = np.where(res.instance > 0, res.instance + n_inst, 0)
-        score[a:z] = res.score
-        node_inst = np.zeros(len(res.nodes), np.int64)
-        node_inst[res.instance_node] = np.arange(1, len(res.instance_node) + 1) + n_inst
-        n_inst += len(res.instance_node)
-        # Planar classes are one instance per class and element group (one tree; METHOD.md, "Classes").
-        planar = np.isin(res_class, _PLANAR) & (res.instance == 0)
-        for c in np.unique(res_class[planar]).tolist():
-            n_inst += 1
-            inst[a:z][planar & (res_class == c)] = n_inst
-        d = res.nodes.to_dict()
-        m = len(res.nodes)
-        cols["segment"] += [s + 1] * m
-        for c in _NODE_COLUMNS[1:]:
-            if c == "instance":
-                cols[c] += node_inst.tolist()
-            elif c in ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax"):
-                j = ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax").index(c)
-                cols[c] += (res.nodes.bbox[:, j] + pts.mean(axis=0)[j % 3]).tolist()
-            else:
-                cols[c] += np.asarray(d[c]).tolist()
-    store.write_unit(f"tree/batches/{b}", {"leaf": leaf, "class": cls, "instance": inst, "score": score})
+
+    def ground_level(s: int, s_end: int) -> float | None:
+        if params.roof_min_height is None or ground is None:
+            return None
+        return float(np.min(ground[s - segs[0]:s_end - segs[0]]))
+
+    if len(bounds) == 2 and params.max_group_points and n > params.max_group_points:
+        cols, n_inst = _sampled_group_tree(store, b, lo, hi, segs[0], scale, params, clf,
+                                           ground_level(segs[0], segs[1]))
+    else:
+        xyz = store.read_slice("coarse/csr/xyz", lo, hi).astype(np.float64) * scale
+        out = {"leaf": np.zeros(n, np.uint64), "class": np.zeros(n, np.uint8), "instance": np.zeros(n, np.uint32),
+               "score": np.zeros(n, np.float32)}
+        cols = {c: [] for c in _NODE_COLUMNS}
+        n_inst = 0
+        for s, s_end in zip(bounds[:-1], bounds[1:], strict=True):
+            a, z = int(offsets[s]) - lo, int(offsets[s_end]) - lo
+            values, group_cols, n_inst = _group_tree(xyz[a:z], s, params, clf, ground_level(s, s_end), n_inst)
+            for k, v in values.items():
+                out[k][a:z] = v
+            for c in _NODE_COLUMNS:
+                cols[c] += group_cols[c]
+        store.write_unit(f"tree/batches/{b}", out)
     _write_table(store, f"tree/tables/{b}.parquet", pa.table(cols))
     info = {"params_hash": cfg["params_hash"], "n_segments": segs[1] - segs[0], "n_points": n,
             "n_nodes": len(cols["segment"]), "n_instances": n_inst, "csr": [lo, hi]}

@@ -111,10 +111,10 @@ class CoarseSection(_Section):
     free_min_points: PosInt = Field(200, description="smallest free segment, points")
     seed: int = Field(0, description="base seed; tile t uses [seed, t]")
     block_points: Annotated[int, Field(ge=0)] = Field(
-        0, description="tiles with more points are segmented in blocks of at most this many, each a task; "
-                       "0 = never (default)")
+        1_500_000, description="tiles with more points are segmented in blocks of at most this many, each a task; "
+                               "0 = never")
     block_margin: PosFloat | None = Field(
-        None, description="context around a block, metres; null = min(ingest buffer, 4 x eps)")
+        None, description="context around a block, metres; null = min(ingest buffer, 2 x eps)")
     sparse_factor: Annotated[float, Field(ge=0)] = Field(
         2.0, description="unsegmented points at least this many times sparser than the scan are segmented once "
                          "more with RANSAC and DBSCAN distances x (2 x this); 0 = one pass")
@@ -137,6 +137,8 @@ class TreeSection(_Section):
     seed: int = Field(0, description="segment g builds its tree with seed [seed, g]")
     roof_min_height: Annotated[float, Field(ge=0)] | None = Field(
         1.5, description="a part classed ground or roof is roof when its median height above the local ground is at least this (m); null = HollowNet's class as it is")
+    max_group_points: Annotated[int, Field(ge=0)] = Field(
+        1_000_000, description="an element group with more points builds its tree on a seeded sample of this many; its points take their nearest sampled point's labels (bounded memory); 0 = never sample")
 
 
 class ClusterSection(_Section):

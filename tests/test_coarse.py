@@ -34,6 +34,10 @@ def _segment(scan_path: Path, store: Path, tile_size: float, params: CoarseParam
     with task_runner("sync", progress=False) as run:
         ingest([str(scan_path)], str(store), IngestParams(tile_size=tile_size, buffer=2.0), runner=run)
         run_coarse(str(store), params, runner=run)
+    return _labels(scan_path, store)
+
+
+def _labels(scan_path: Path, store: Path) -> np.ndarray:
     s = RunStore.open(store)
     n = laspy.read(scan_path).header.point_count
     labels = np.full(n, -1, dtype=np.int64)
@@ -214,8 +218,8 @@ def test_sparse_part_of_a_plane_joins_its_dense_part():
 def test_block_tasks_equal_the_in_process_blocks(scan, tmp_path):
     """run_coarse runs the blocks of a dense tile as tasks of their own and joins them in a
     second round: the tile's segments equal those of the in-process loop, point by point,
-    and the blocks' intermediate results are gone once the tile is recorded."""
-    from pipeline.coarse import BLOCK_STAGE, _margin, _segment_tile, _tile_points
+    and the blocks' inputs and intermediate results are gone once the tile is recorded."""
+    from pipeline.coarse import BLOCK_STAGE, PLAN_STAGE, _margin, _segment_tile, _tile_points
 
     store_path = tmp_path / "s"
     _segment(scan, store_path, 500.0, CoarseParams(eps=0.3, block_points=8_000))
@@ -227,9 +231,55 @@ def test_block_tasks_equal_the_in_process_blocks(scan, tmp_path):
     blocked = [int(t) for t, r in recs.items() if r["n_blocks"] > 1]
     assert blocked
     assert len(s.records(BLOCK_STAGE)) == sum(recs[str(t)]["n_blocks"] for t in blocked)
+    assert {int(t): r["n_blocks"] for t, r in s.records(PLAN_STAGE).items()} == {t: recs[str(t)]["n_blocks"]
+                                                                                for t in blocked}
     for t in blocked:
         xyz = _tile_points(s, t, np.asarray(s.attrs["coords"]["scale"]))["local"]
         seg, _, _, n_blocks = _segment_tile(xyz, params, cfg["eps"], t, _margin(s, cfg, params))
         assert n_blocks == recs[str(t)]["n_blocks"]
         assert np.array_equal(s.read_unit(f"coarse/tiles/{t}", ["segment"])["segment"], seg)
-        assert not s.has(f"coarse/blocks/{t}")
+        for group in ("blocks", "block_input", "block_of"):
+            assert not s.has(f"coarse/{group}/{t}")
+
+
+def test_interrupted_block_tasks_resume(scan, tmp_path):
+    """A run stopped after some block tasks resumes: planned tiles are not cut again,
+    recorded blocks are not run again, and the answer is that of an uninterrupted run."""
+    from pipeline.coarse import plan_blocks
+
+    params = CoarseParams(eps=0.3, block_points=8_000)
+    whole = _segment(scan, tmp_path / "a", 500.0, params)
+
+    def is_block(args, desc):
+        return desc == "coarse: tiles" and args[2] >= 0
+
+    class Stop(Exception):
+        pass
+
+    calls: list[tuple] = []
+
+    def runner(stop_after):
+        def run_units(fn, args_list, desc):
+            out = []
+            with task_runner("sync", progress=False) as run:
+                for args in args_list:
+                    if is_block(args, desc) and sum(is_block(a, d) for _, a, d in calls) == stop_after:
+                        raise Stop
+                    calls.append((fn, args, desc))
+                    out.extend(run(fn, [args], desc))
+            return out
+        return run_units
+
+    store = tmp_path / "b"
+    with task_runner("sync", progress=False) as run:
+        ingest([str(scan)], str(store), IngestParams(tile_size=500.0, buffer=2.0), runner=run)
+    with pytest.raises(Stop):
+        run_coarse(str(store), params, runner=runner(3))
+    assert any(fn is plan_blocks for fn, _, _ in calls)
+    calls.clear()
+    run_coarse(str(store), params, runner=runner(-1))
+    s = RunStore.open(store)
+    n_blocks = sum(r["n_blocks"] for r in s.records("coarse").values() if r["n_blocks"] > 1)
+    assert not any(fn is plan_blocks for fn, _, _ in calls)
+    assert sum(is_block(a, d) for _, a, d in calls) == n_blocks - 3
+    assert np.array_equal(_labels(scan, store), whole)

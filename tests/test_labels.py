@@ -22,14 +22,15 @@ def scan(tmp_path_factory):
     return path
 
 
-def _run(tmp_path, scan, extra=""):
+def _run(tmp_path, scan, extra="", tree="{enabled: false}"):
+    tmp_path.mkdir(parents=True, exist_ok=True)
     wf_path = tmp_path / "wf.yaml"
     wf_path.write_text(f"""\
 input: {{files: [{scan}]}}
 store: {tmp_path / 's.zarr'}
 ingest: {{tile_size: 50.0}}
 coarse: {{min_support: 300}}
-tree: {{enabled: false}}
+tree: {tree}
 cluster: {{scheduler: sync}}
 {extra}""")
     run_workflow(load_workflow(wf_path), progress=False, say=lambda _: None)
@@ -83,3 +84,27 @@ outputs: {{las: {tmp_path / 'o.las'}}}
     out = laspy.read(tmp_path / "o.las")
     assert len(out) == len(src)
     np.testing.assert_array_equal(np.asarray(out["segment_id"]), lab["segment"])
+
+
+def test_large_groups_are_built_on_a_sample(tmp_path, scan):
+    """An element group above tree.max_group_points builds its tree on a sample and every
+    point takes its nearest sampled point's labels: all points labelled, node counts cover
+    the whole group, and the classes mostly agree with the tree on every point."""
+    import pyarrow.parquet as pq
+
+    store, sampled = _run(tmp_path / "a", scan, tree="{enabled: true, max_group_points: 4000}")
+    _, full = _run(tmp_path / "b", scan, tree="{enabled: true, max_group_points: 0}")
+    recs = store.records("tree")
+    big = [b for b, r in recs.items() if r["n_points"] > 4000 and r["n_segments"] >= 1]
+    assert big
+    for b in big:
+        t = pq.read_table(tmp_path / "a" / "s.zarr" / "tree" / "tables" / f"{b}.parquet").to_pydict()
+        roots = [i for i, p in enumerate(t["parent"]) if p == -1]
+        if len(roots) != 1:  # a batch of several groups: not sampled
+            continue
+        n = recs[b]["n_points"]
+        assert t["n_points"][roots[0]] == n
+        assert sum(k for k, leaf in zip(t["n_points"], t["is_leaf"], strict=True) if leaf) == n
+        leaf = store.read_slice(f"tree/batches/{b}/leaf")
+        assert len(leaf) == n and set(np.unique(leaf).tolist()) <= {i for i, x in enumerate(t["is_leaf"]) if x}
+    assert (sampled["class"] == full["class"]).mean() > 0.8
