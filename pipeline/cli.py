@@ -172,9 +172,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="leave points that no primitive explains unsegmented (default: DBSCAN them too)")
     c.add_argument("--free-min-points", type=_positive_int, default=200,
                    help="smallest free segment, points (default 200)")
-    c.add_argument("--block-points", type=_nonnegative_int, default=1_500_000,
+    c.add_argument("--block-points", type=_nonnegative_int, default=3_000_000,
                    help="segment tiles with more points in x-y blocks of at most this many, each a "
-                        "task, joined like tiles (default 1,500,000; 0 = never)")
+                        "task, joined like tiles (default 3,000,000; 0 = never)")
     c.add_argument("--block-margin", type=_float, default=None,
                    help="context around a block, metres (default: min(buffer, 2 x eps))")
     c.add_argument("--sparse-factor", type=_non_negative, default=2.0,

@@ -91,7 +91,7 @@ class CoarseParams:
         (each with a margin of context around it, each a task of its own), joined like
         tiles, so that a task's memory follows this bound and not the densest spot of the
         scan (a tile near a scanner station can hold several times the average). 0 =
-        never. Default 1.5 M (docs/method.md, "Blocks inside a dense tile").
+        never. Default 3 M (docs/method.md, "Blocks inside a dense tile").
     block_margin : float or None
         Context around a block, metres; None = min(the tile buffer, 2 x the DBSCAN eps).
         Dense blocks are small (a 1 M-point block near a station can be 3 x 4 m), so a
@@ -129,7 +129,7 @@ class CoarseParams:
     angle_tol_deg: float = 10.0
     distance_tol: float = 0.15
     radius_tol: float = 0.15
-    block_points: int = 1_500_000
+    block_points: int = 3_000_000
     block_margin: float | None = None
     sparse_factor: float = 2.0
     group_gap: float = 0.6
