@@ -209,7 +209,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="points per task; small segments are batched (default 1,000,000)")
     tr.add_argument("--max-group-points", type=_nonnegative_int, default=1_000_000,
                     help="build the tree of a larger element group on a seeded sample of this many points; "
-                         "its points take their nearest sampled point's labels (default 1,000,000; 0 = never)")
+                         "its points take their nearest sampled point's labels (default 1,000,000; 0 = never; else >= 1000)")
     tr.add_argument("--weights", help="HollowNet weights (default: the shipped ones)")
     tr.add_argument("--seed", type=int, default=0)
     tr.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process")

@@ -87,8 +87,8 @@ class TreeStageParams:
         if not (isinstance(self.batch_points, int) and self.batch_points >= 1):
             raise ConfigError(f"The 'batch_points' parameter of tree must be an int >= 1. Got {self.batch_points!r} instead.")
         if isinstance(self.max_group_points, bool) or not isinstance(self.max_group_points, int) \
-                or self.max_group_points < 0:
-            raise ConfigError(f"The 'max_group_points' parameter of tree must be an int >= 0. "
+                or not (self.max_group_points == 0 or self.max_group_points >= 1000):
+            raise ConfigError(f"The 'max_group_points' parameter of tree must be 0 or an int >= 1000. "
                               f"Got {self.max_group_points!r} instead.")
 
     def to_dict(self) -> dict[str, Any]:

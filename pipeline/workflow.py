@@ -126,6 +126,10 @@ class CoarseSection(_Section):
         8.0, description="planes wider than this in x-y, metres (ground, roofs, facades), are never grouped")
 
 
+#: The smallest sample a large element group's tree is built on (tree.max_group_points).
+MIN_GROUP_SAMPLE = 1000
+
+
 class TreeSection(_Section):
     """The hierarchical tree (tree/): ``enabled: false`` stops after the coarse stage."""
 
@@ -138,7 +142,14 @@ class TreeSection(_Section):
     roof_min_height: Annotated[float, Field(ge=0)] | None = Field(
         1.5, description="a part classed ground or roof is roof when its median height above the local ground is at least this (m); null = HollowNet's class as it is")
     max_group_points: Annotated[int, Field(ge=0)] = Field(
-        1_000_000, description="an element group with more points builds its tree on a seeded sample of this many; its points take their nearest sampled point's labels (bounded memory); 0 = never sample")
+        1_000_000, description="an element group with more points builds its tree on a seeded sample of this many (0 or at least 1000); its points take their nearest sampled point's labels (bounded memory); 0 = never sample")
+
+    @field_validator("max_group_points")
+    @classmethod
+    def _sample_not_tiny(cls, v: int) -> int:
+        if 0 < v < MIN_GROUP_SAMPLE:
+            raise ValueError(f"must be 0 (never sample) or at least {MIN_GROUP_SAMPLE}")
+        return v
 
 
 class ClusterSection(_Section):

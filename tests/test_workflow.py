@@ -106,3 +106,10 @@ def test_changed_stages_names_the_first_changed_stage_and_all_after():
     assert redo == ["tree", "labels"] and diffs == ["tree.max_depth: 3 -> 4"]
     redo, _ = changed_stages(base, {**base, "ingest": {"voxel": 0.05}})
     assert redo == ["ingest", "coarse", "tree", "labels"]
+
+
+def test_tiny_tree_sample_is_refused(tmp_path):
+    path = _write(tmp_path, GOOD.replace("STORE", str(tmp_path / "s.zarr")))
+    with pytest.raises(WorkflowError, match="tree.max_group_points"):
+        load_workflow(path, ["tree.max_group_points=5"])
+    assert load_workflow(path, ["tree.max_group_points=0"]).tree.max_group_points == 0
