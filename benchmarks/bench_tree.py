@@ -12,15 +12,18 @@ makes them), randomly subsampled to ``--points`` points (default 100 000):
 Per segment the script times each operator (``v1``, ``psi``, ``p``, ``u``, ``h``, ``v2``,
 ``rho``; ``p``, ``u``, ``v2`` and ``rho`` on the transport curve ``psi`` found), each
 sequence on its own (``s1`` and ``s3`` *including* their ``psi`` fit, as a caller of one
-sequence pays it) and ``propose`` (all three, one ``psi`` shared). Every figure is the
+sequence pays it) and ``propose`` (all three and the storeys, one ``psi`` shared). Every figure is the
 median of ``--repeats`` runs (RANSAC seeds fixed).
 
 Whole tree: ``build_tree`` of the minaret segment (``max_depth=3``, ``rng=0``) with
 
 1. the tests' stand-in classifier (ground-truth majority class by nearest labelled
-   point; a k-d tree query per child, so it costs about as much as a light classifier);
+   point; a k-d tree query per child, so it costs about as much as a light classifier),
+   the paper's energy deciding;
 2. HollowNet, ``hollownet.predict.Classifier.get()`` on CPU, when
-   ``hollownet/weights/hollownet-v1.pt`` exists (the output says so when it does not);
+   ``hollownet/weights/hollownet-v1.pt`` exists (the output says so when it does not),
+   once with the paper's energy deciding and once with the split model (the default of
+   ``hollowtree run``, ``tree/data/split-v1.json``);
 3. with ``--hollownet-weights PATH``, HollowNet loaded from another weights file (a
    training checkpoint, say) as well: the network and the voxelisation are the same,
    so the *time* is HollowNet's even though the classes are not final; the tree's
@@ -154,18 +157,18 @@ def bench_segment(pts: np.ndarray, repeats: int) -> dict[str, float | str]:
     out["s1 (with psi)"] = median_time(lambda: s1(pts, rng=0), repeats)
     out["s2"] = median_time(lambda: s2(pts), repeats)
     out["s3 (with psi)"] = median_time(lambda: s3(pts, rng=0), repeats)
-    out["propose (S1+S2+S3, one psi)"] = median_time(lambda: propose(pts, rng=0), repeats)
+    out["propose (S1+S2+S3+storeys, one psi)"] = median_time(lambda: propose(pts, rng=0), repeats)
     return out
 
 
-def bench_tree(pts: np.ndarray, classifier, repeats: int) -> dict[str, float]:
+def bench_tree(pts: np.ndarray, classifier, repeats: int, split=None) -> dict[str, float]:
     timed = Timed(classifier)
-    build_tree(pts, timed, rng=0)  # warm-up
+    build_tree(pts, timed, rng=0, split=split)  # warm-up
     ts, cls_s = [], []
     for _ in range(repeats):
         timed.seconds, timed.calls, timed.segments = 0.0, 0, 0
         t0 = time.perf_counter()
-        r = build_tree(pts, timed, rng=0)
+        r = build_tree(pts, timed, rng=0, split=split)
         ts.append(time.perf_counter() - t0)
         cls_s.append(timed.seconds)
     return {"total": statistics.median(ts), "classifier": statistics.median(cls_s),
@@ -207,18 +210,21 @@ def main(argv: list[str] | None = None) -> dict:
     print(f"\n## whole tree: minaret, {len(pts)} points, max_depth 3")
     print(f"{'classifier':40s} {'total s':>8s} {'/ 1 s':>6s} {'classifier s':>12s} {'calls':>6s} "
           f"{'segments':>8s} {'nodes':>6s} {'root':>10s}")
-    clfs: list[tuple[str, object]] = [("stand-in (tests)", StandInClassifier(xyz, gcls))]
+    from tree.split import load_split_model
+
+    clfs: list[tuple[str, object, object]] = [("stand-in (tests), energy", StandInClassifier(xyz, gcls), None)]
     if HOLLOWNET_WEIGHTS.is_file():
         from hollownet.predict import Classifier
-        clfs.append(("HollowNet (CPU)", Classifier.get()))
+        clfs.append(("HollowNet (CPU), energy", Classifier.get(), None))
+        clfs.append(("HollowNet (CPU), split model (default)", Classifier.get(), load_split_model()))
     else:
         report["trees"]["HollowNet"] = f"skipped: {HOLLOWNET_WEIGHTS.relative_to(REPO)} does not exist"
     if args.hollownet_weights is not None:
         from hollownet.predict import Classifier
         clfs.append((f"HollowNet ({args.hollownet_weights.name}, timing only)",
-                     Classifier(args.hollownet_weights)))
-    for label, clf in clfs:
-        r = bench_tree(pts, clf, args.tree_repeats)
+                     Classifier(args.hollownet_weights), None))
+    for label, clf, split in clfs:
+        r = bench_tree(pts, clf, args.tree_repeats, split)
         report["trees"][label] = r
         print(f"{label:40s} {r['total']:8.3f} {r['total'] / TREE_TARGET_S:6.2f} {r['classifier']:12.3f} "
               f"{r['calls']:6d} {r['segments classified']:8d} {r['nodes']:6d} "

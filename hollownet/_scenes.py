@@ -32,12 +32,14 @@ from scenes.elements import (
     tree,
     wall,
 )
+from scenes._builders import add_arcade
+from scenes.elements import _crown
 from scenes.mesh import TriMesh
 from scenes.scene import Scene, SceneBuilder
 from scenes.shapes import box, ellipsoid
 from tiling.classes import ClassId
 
-__all__ = ["RECIPES", "random_scene"]
+__all__ = ["RECIPES", "random_scene", "storeyed_arcades"]
 
 EYE = 1.6
 
@@ -259,3 +261,39 @@ RECIPES: dict[str, tuple[Callable[[np.random.Generator], Scene], tuple[ClassId, 
 def random_scene(recipe: str, rng: np.random.Generator) -> Scene:
     """Build one random scene of ``recipe`` (a key of :data:`RECIPES`)."""
     return RECIPES[recipe][0](rng)
+
+
+def storeyed_arcades(rng: np.random.Generator) -> Scene:
+    """Two or three storeys of arcades, one above the other, each with a wall band above
+    its bays, straight or curved (the training scenes of the split model,
+    :mod:`tree.fit_split`; not a HollowNet recipe). Every bay is one arch instance."""
+    b = SceneBuilder("storeyed")
+    n_st = int(rng.integers(2, 4))
+    n = int(rng.integers(5, 16))
+    pitch = _u(rng, 2.0, 4.5)
+    thick = _u(rng, 0.6, 1.8)
+    path: ArcPath | StraightPath
+    if rng.random() < 0.5:
+        radius = _u(rng, 12.0, 30.0)
+        sweep = min(n * pitch / radius, 3.3)
+        path = ArcPath(cx=0.0, cy=-radius * 0.5, radius=radius, theta0=math.pi / 2 - sweep / 2,
+                       theta1=math.pi / 2 + sweep / 2)
+        pitch = path.length / n
+    else:
+        path = StraightPath(x0=-n * pitch / 2, y0=0.0, x1=n * pitch / 2, y1=0.0)
+    z0 = 0.0
+    kind = str(rng.choice(["round", "pointed"]))
+    for s in range(n_st):
+        span = _u(rng, 0.55, 0.75) * pitch
+        spring = _u(rng, 0.8, 1.5) * pitch
+        pointed = _u(rng, 0.7, 1.2)
+        top = _crown(kind, span, spring, pointed) + 0.2 * span
+        hgt = top + _u(rng, 0.4, 1.5)
+        parts = arcade(path, n_bays=n, bay_width=pitch, span=span, spring=spring, kind=kind,
+                       pointedness=pointed, height=hgt, thickness=thick, z0=z0)
+        add_arcade(b, parts, f"storey {s + 1}")
+        z0 += hgt
+    b.add(ground(-60, 60, -60, 60), ClassId.GROUND, "ground")
+    _add_clutter(b, rng, int(rng.integers(0, 4)), 30.0, 6.0)
+    _stations(b, rng, int(rng.integers(3, 7)), 10.0, 35.0)
+    return b.build()

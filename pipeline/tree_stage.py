@@ -41,9 +41,11 @@ from tiling.store import RunStore
 __all__ = ["TreeStageParams", "tree_batch", "run_tree", "TreeReport", "plan_batches", "group_starts"]
 
 STAGE = "tree"
+#: How a node's proposal is kept (``TreeStageParams.decision``).
+DECISIONS = ("split-model", "energy")
 #: Version of the tree's algorithm (tree/): part of the stage's parameters hash and of the
 #: workflow parameters a run records, so a store made by an older version is redone.
-TREE_ALGORITHM = "tree-v2"
+TREE_ALGORITHM = "tree-v3"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -54,8 +56,12 @@ class TreeStageParams:
     ----------
     max_depth : int
         The paper's ``d``.
+    decision : str
+        ``"split-model"`` (the learned split model, ``tree/data/split-v1.json``) or
+        ``"energy"`` (the paper's ``xi = w . e``, ``tree/data/energy-v1.json``).
     threshold : float or None
-        A split is kept when ``xi >= threshold``; None = the fitted energy model's.
+        A split is kept when its score (the split model's probability, or ``xi``) reaches
+        this; None = the model's own.
     batch_points : int
         Points per task (small segments are batched; a larger segment is one task).
     weights : str or None
@@ -74,6 +80,7 @@ class TreeStageParams:
     """
 
     max_depth: int = 3
+    decision: str = "split-model"
     threshold: float | None = None
     batch_points: int = 200_000
     weights: str | None = None
@@ -84,6 +91,9 @@ class TreeStageParams:
     def __post_init__(self) -> None:
         if not (isinstance(self.max_depth, int) and self.max_depth >= 0):
             raise ConfigError(f"The 'max_depth' parameter of tree must be an int >= 0. Got {self.max_depth!r} instead.")
+        if self.decision not in DECISIONS:
+            raise ConfigError(f"The 'decision' parameter of tree must be one of {list(DECISIONS)}. "
+                              f"Got {self.decision!r} instead.")
         if not (isinstance(self.batch_points, int) and self.batch_points >= 1):
             raise ConfigError(f"The 'batch_points' parameter of tree must be an int >= 1. Got {self.batch_points!r} instead.")
         if isinstance(self.max_group_points, bool) or not isinstance(self.max_group_points, int) \
@@ -96,8 +106,8 @@ class TreeStageParams:
 
     @classmethod
     def from_workflow(cls, section: Any) -> TreeStageParams:
-        return cls(max_depth=section.max_depth, threshold=section.threshold, batch_points=section.batch_points,
-                   weights=section.weights, seed=section.seed, roof_min_height=section.roof_min_height,
+        return cls(max_depth=section.max_depth, decision=section.decision, threshold=section.threshold,
+                   batch_points=section.batch_points, weights=section.weights, seed=section.seed, roof_min_height=section.roof_min_height,
                    max_group_points=section.max_group_points)
 
 
@@ -159,10 +169,12 @@ def _group_tree(pts: np.ndarray, s: int, params: TreeStageParams, clf: Any, grou
     and score, the node table's columns and the new instance count."""
     from tree.build import build_tree
     from tree.ground import ground_or_roof
+    from tree.split import load_split_model
 
     center = pts.mean(axis=0)
     res = build_tree(pts - center, clf, max_depth=params.max_depth, threshold=params.threshold,
-                     rng=np.random.SeedSequence([params.seed, s + 1]))
+                     rng=np.random.SeedSequence([params.seed, s + 1]),
+                     split=load_split_model() if params.decision == "split-model" else None)
     if params.roof_min_height is not None and ground_level is not None:
         res_class = ground_or_roof(res.class_id, pts[:, 2], res.leaf, ground_level, params.roof_min_height)
     else:

@@ -135,7 +135,9 @@ class TreeSection(_Section):
 
     enabled: bool = Field(True, description="run the tree + HollowNet stage")
     max_depth: Annotated[int, Field(ge=0)] = Field(3, description="maximum depth d of Algorithm 1")
-    threshold: float | None = Field(None, description="a split is kept when its energy xi >= this; null = the fitted model's")
+    decision: Literal["split-model", "energy"] = Field(
+        "split-model", description="how a node's best proposal is chosen and kept: the learned split model (tree/data/split-v1.json) or the paper's energy xi = w . e (tree/data/energy-v1.json)")
+    threshold: float | None = Field(None, description="a split is kept when its score (the split model's probability, or xi) >= this; null = the model's own")
     batch_points: PosInt = Field(200_000, description="points per tree task (small segments are batched)")
     weights: str | None = Field(None, description="HollowNet weights file; null = the shipped default")
     seed: int = Field(0, description="segment g builds its tree with seed [seed, g]")

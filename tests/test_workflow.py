@@ -113,3 +113,11 @@ def test_tiny_tree_sample_is_refused(tmp_path):
     with pytest.raises(WorkflowError, match="tree.max_group_points"):
         load_workflow(path, ["tree.max_group_points=5"])
     assert load_workflow(path, ["tree.max_group_points=0"]).tree.max_group_points == 0
+
+
+def test_tree_decision_is_checked(tmp_path):
+    path = _write(tmp_path, GOOD.replace("STORE", str(tmp_path / "s.zarr")))
+    assert load_workflow(path).tree.decision == "split-model"
+    assert load_workflow(path, ["tree.decision=energy"]).tree.decision == "energy"
+    with pytest.raises(WorkflowError, match="tree.decision"):
+        load_workflow(path, ["tree.decision=coin"])

@@ -1,9 +1,11 @@
 """Algorithm 1 of the paper: the greedy hierarchical tree of one coarse segment.
 
-At every node the three sequences propose splits (:func:`tree.sequences.propose`); the
+At every node the sequences propose splits (:func:`tree.sequences.propose`); the
 classifier scores every proposal's children; each proposal gets ``xi = w . e``
-(:mod:`tree.energy`); the best is kept if ``xi >= threshold`` and the recursion goes on in
-its children down to ``max_depth``. An explicit stack replaces the paper's recursion.
+(:mod:`tree.energy`) or, with a split model (:mod:`tree.split`, the pipeline's default),
+the model's probability that it is right; the best is kept if that score reaches the
+threshold and the recursion goes on in its children down to ``max_depth``. An explicit
+stack replaces the paper's recursion.
 
 Element instances (``../shared/METHOD.md``, "Classes"): the largest node whose class is an
 element class (arch, dome, minaret, pillar) and whose ancestors are not; every point below
@@ -22,6 +24,7 @@ from tiling.classes import ELEMENT_CLASSES
 from tree.energy import Classifier, EnergyModel, energy_terms, load_energy_model
 from tree.operators import RngLike
 from tree.sequences import Proposal, SequenceParams, propose
+from tree.split import SplitModel, split_features
 
 __all__ = ["NodeTable", "TreeResult", "build_tree"]
 
@@ -124,9 +127,10 @@ def _bbox(xyz: FloatArray) -> FloatArray:
     return np.array([c.min() for c in cols] + [c.max() for c in cols], dtype=np.float64)
 
 
-def _classify(classifier: Classifier, parts: list[FloatArray]) -> tuple[IntArray, FloatArray]:
-    cls, score, _ = classifier.predict(parts)
-    return np.asarray(cls, dtype=np.int64).reshape(-1), np.asarray(score, dtype=np.float64).reshape(-1)
+def _classify(classifier: Classifier, parts: list[FloatArray]) -> tuple[IntArray, FloatArray, FloatArray]:
+    cls, score, prob = classifier.predict(parts)
+    return (np.asarray(cls, dtype=np.int64).reshape(-1), np.asarray(score, dtype=np.float64).reshape(-1),
+            np.asarray(prob, dtype=np.float64).reshape(len(parts), -1))
 
 
 def _is_flat(pts: FloatArray, params: SequenceParams) -> bool:
@@ -150,6 +154,7 @@ def build_tree(
     threshold: float | None = None,
     params: SequenceParams | None = None,
     rng: RngLike = None,
+    split: SplitModel | None = None,
 ) -> TreeResult:
     """Build the hierarchical tree of one segment (Algorithm 1).
 
@@ -165,11 +170,16 @@ def build_tree(
     max_depth : int
         The paper's ``d``: nodes at this depth are not split.
     threshold : float, optional
-        Overrides ``model.threshold``.
+        Overrides the threshold of ``split`` (when given) or of ``model``.
     params : SequenceParams, optional
     rng : int, Generator or None
         Seeds the RANSAC fits: one base seed is drawn from it and node ``i`` uses
         ``SeedSequence([base, i])``, so the same input and seed give the same tree.
+    split : SplitModel, optional
+        Decide by this split model (``load_split_model()``) instead of the energy: the
+        proposal of highest probability is kept when it reaches the threshold. The
+        classifier's probability rows must then be HollowNet's (8 classes). The energy's
+        terms are still computed and recorded.
 
     Returns
     -------
@@ -203,7 +213,8 @@ def build_tree(
     prior = model.W
 
     n = len(a)
-    cls0, sc0 = _classify(classifier, [a]) if n else (np.array([0]), np.array([0.0]))
+    cls0, sc0, pr0 = _classify(classifier, [a]) if n else (np.array([0]), np.array([0.0]), np.zeros((1, 8)))
+    probs: list[FloatArray] = [pr0[0]]
     parent, depth, seq, xi, cls, score, npts = [-1], [0], [0], [np.nan], [int(cls0[0])], [float(sc0[0])], [n]
     terms: list[FloatArray] = [np.full(5, np.nan)]
     bbox = [_bbox(a)]
@@ -218,25 +229,33 @@ def build_tree(
         if _is_flat(pts, params):
             continue
         node_rng = np.random.default_rng(np.random.SeedSequence([base, node]))
-        props = [pr for pr in propose(pts, params=params, rng=node_rng).values() if pr is not None]
+        props = [(key, pr) for key, pr in propose(pts, params=params, rng=node_rng).items() if pr is not None]
         if not props:
             continue
-        parts = [pts[c] for pr in props for c in pr.children]
-        all_cls, all_sc = _classify(classifier, parts)
-        best: tuple[float, Proposal, FloatArray, IntArray, FloatArray] | None = None
+        parts = [pts[c] for _, pr in props for c in pr.children]
+        all_cls, all_sc, all_pr = _classify(classifier, parts)
+        cand: list[tuple[Proposal, FloatArray, IntArray, FloatArray, FloatArray]] = []
+        feats: list[FloatArray] = []
         k = 0
-        for pr in props:
+        extent = np.ptp(pts, axis=0) if split is not None else None
+        for key, pr in props:
             s = pr.n_children
-            c_cls, c_sc = all_cls[k:k + s], all_sc[k:k + s]
+            c_cls, c_sc, c_pr = all_cls[k:k + s], all_sc[k:k + s], all_pr[k:k + s]
             k += s
-            e = energy_terms([len(c) for c in pr.children], n_min=model.n_min, prior=prior,
+            sizes = [len(c) for c in pr.children]
+            e = energy_terms(sizes, n_min=model.n_min, prior=prior,
                              parent_class=cls[node], sequence=pr.sequence, scores=c_sc)
-            x = model.xi(e)
-            if best is None or x > best[0]:
-                best = (x, pr, e, c_cls, c_sc)
-        assert best is not None
-        x, pr, e, c_cls, c_sc = best
-        if not x >= thr:
+            cand.append((pr, e, c_cls, c_sc, c_pr))
+            if split is not None:
+                feats.append(split_features(n_parent=len(idx), extent=extent, depth=depth[node], key=key,
+                                            parent_class=cls[node], parent_probs=probs[node], child_sizes=sizes,
+                                            child_classes=c_cls, child_probs=c_pr, cuts=pr.cuts))
+        # One call of the split model for all proposals of the node (its trees are walked per call).
+        scores = split.probability(np.vstack(feats)) if split is not None else [model.xi(c[1]) for c in cand]
+        j_best = int(np.argmax(scores))  # the first of equal scores, as before
+        x = float(scores[j_best])
+        pr, e, c_cls, c_sc, c_pr = cand[j_best]
+        if not x >= (split.threshold if split is not None and threshold is None else thr):
             continue
         is_leaf[node] = False
         for j, child in enumerate(pr.children):
@@ -249,6 +268,7 @@ def build_tree(
             xi.append(x)
             cls.append(int(c_cls[j]))
             score.append(float(c_sc[j]))
+            probs.append(c_pr[j])
             npts.append(len(gidx))
             bbox.append(_bbox(a[gidx]))
             is_leaf.append(True)
@@ -270,6 +290,13 @@ def _per_point(nodes: NodeTable, leaf_of: IntArray) -> TreeResult:
     m = len(nodes)
     element = np.isin(nodes.class_id, np.asarray([int(c) for c in ELEMENT_CLASSES]))
     owner = np.full(m, -1, dtype=np.int64)  # element-instance node of each node, or -1
+    # A split node is an element only when its children (by points) mostly agree with it.
+    same = np.zeros(m, dtype=np.int64)
+    for i in range(1, m):
+        par = int(nodes.parent[i])
+        if nodes.class_id[i] == nodes.class_id[par]:
+            same[par] += int(nodes.n_points[i])
+    element &= nodes.is_leaf | (2 * same >= nodes.n_points)
     inst_nodes: list[int] = []
     for i in range(m):  # parents come before children (creation order)
         par = int(nodes.parent[i])

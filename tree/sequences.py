@@ -11,9 +11,15 @@ order along the cut axis) or None when it has nothing to propose: no transport c
 What each histogram holds (the paper says only "the histogram of the profile curve"):
 S1 bins the height and keeps the profile's outline, the largest distance from the axis
 in each bin, so a balcony or a moulding is a peak; S2 and S3 bin the position along the
-wall and count points, so a pier (front, back and both soffits) is a peak and an opening
-a valley. Cuts at peaks put each balcony or pier on a boundary, as the ground truth's
-"mid-pier to mid-pier" bays are.
+wall and count the occupied 0.1 m cells of the wall's (position, height) projection
+(:func:`occupancy_cut`; a plain point count follows the scan's density, highest near each
+station), so a pier (solid over the wall's height) is a peak and an opening a valley.
+Cuts at peaks put each balcony or pier on a boundary, as the ground truth's "mid-pier to
+mid-pier" bays are.
+
+A fourth proposal, the storeys (:func:`storeys`), cuts the same projection along the
+height: a facade of several storeys of arcades is cut into storeys first, then each
+storey into bays (the paper's S2 gives "bays and storeys").
 """
 
 from __future__ import annotations
@@ -36,7 +42,7 @@ from tree.operators import (
     v2,
 )
 
-__all__ = ["SEQUENCES", "Proposal", "SequenceParams", "propose", "s1", "s2", "s3"]
+__all__ = ["SEQUENCES", "Proposal", "SequenceParams", "occupancy_cut", "propose", "s1", "s2", "s3", "storeys"]
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
@@ -69,6 +75,11 @@ class SequenceParams:
         height (1st to 99th percentile of z) is under ``max(flat_height, flat_ratio x
         its larger horizontal extent)``: a ground or roof patch has no vertical structure
         for S1 or S3 to cut, and S2 would only follow its point density.
+    cell : float
+        Edge of the occupancy cells of S2 and S3 (metres; :func:`occupancy_cut`). 0 = the
+        plain point count (the histogram follows the scan's density).
+    storeys : bool
+        Also propose a cut along the height from the same occupancy (:func:`storeys`).
     """
 
     prominence: float = 0.05
@@ -79,6 +90,8 @@ class SequenceParams:
     residual_threshold: float | None = None
     flat_ratio: float = 0.05
     flat_height: float = 0.5
+    cell: float = 0.1
+    storeys: bool = True
 
     def to_dict(self) -> dict[str, object]:
         return dict(self.__dict__)
@@ -95,7 +108,7 @@ class Proposal:
     Attributes
     ----------
     sequence : int
-        1, 2 or 3.
+        1, 2 or 3 (the storeys carry the sequence whose projection they cut: 2 or 3).
     children : tuple of ndarray of int64
         Indices into the node's points; disjoint, covering every point.
     cuts : ndarray of float64
@@ -213,7 +226,8 @@ def s1(xyz: npt.ArrayLike, *, params: SequenceParams | None = None, rng: RngLike
 
 
 def s2(xyz: npt.ArrayLike, *, params: SequenceParams | None = None) -> Proposal | None:
-    """``S2 = rho(v2(h(x)))``: cut at the density peaks along the dominant vertical plane.
+    """``S2 = rho(v2(h(x)))``: cut at the peaks of the occupancy along the dominant vertical
+    plane (:func:`occupancy_cut`; ``params.cell`` 0: of the point count).
 
     Examples
     --------
@@ -227,20 +241,20 @@ def s2(xyz: npt.ArrayLike, *, params: SequenceParams | None = None) -> Proposal 
     params = params or SequenceParams()
     if len(a) < params.min_points:
         return None
-    t = h(a)[:, 0]
-    hist = v2(t, statistic="count", sigma=params.sigma, bins_per_crossing=params.bins_per_crossing)
-    return _finish(2, t, rho(hist, prominence=params.prominence), params, None)
+    tz = h(a)
+    return _finish(2, tz[:, 0], occupancy_cut(tz[:, 0], tz[:, 1], params), params, None)
 
 
 def s3(xyz: npt.ArrayLike, *, params: SequenceParams | None = None, rng: RngLike = None,
        curve: TransportCurve | None = None) -> Proposal | None:
-    """``S3 = rho(v2(u(psi(v1(x)))))``: cut at the density peaks along the un-warped curve.
+    """``S3 = rho(v2(u(psi(v1(x)))))``: cut at the peaks of the un-warped wall's occupancy
+    along the curve (:func:`occupancy_cut`; ``params.cell`` 0: of its point count).
 
     Examples
     --------
     >>> th = np.r_[np.linspace(0, 1, 40), np.full(40, 1.25), np.linspace(1.5, 2.5, 40)]
     >>> xyz = np.column_stack([5 * np.cos(th), 5 * np.sin(th), np.linspace(0, 1, 120)])
-    >>> prop = s3(xyz, rng=0)
+    >>> prop = s3(xyz, params=SequenceParams(cell=0.0), rng=0)  # a density peak at 1.25 rad
     >>> prop.n_children, round(prop.curve.radius, 3)
     (2, 5.0)
     """
@@ -254,15 +268,67 @@ def s3(xyz: npt.ArrayLike, *, params: SequenceParams | None = None, rng: RngLike
             return None
         assert isinstance(fit, TransportCurve)
         curve = fit
-    s = u(a, curve)[:, 0]
-    hist = v2(s, statistic="count", sigma=params.sigma, bins_per_crossing=params.bins_per_crossing)
-    return _finish(3, s, rho(hist, prominence=params.prominence), params, curve)
+    sz = u(a, curve)
+    return _finish(3, sz[:, 0], occupancy_cut(sz[:, 0], sz[:, 1], params), params, curve)
+
+
+def storeys(xyz: npt.ArrayLike, *, params: SequenceParams | None = None,
+            curve: TransportCurve | None = None) -> Proposal | None:
+    """Storeys: S3's (or, without a transport curve, S2's) projection cut along the height.
+
+    The occupancy of the un-warped (or projected) wall, counted per height, is high
+    where the wall is solid across its length (the band over a row of arches, a floor
+    edge) and low through a row of openings; the cuts are its peaks, as along the wall.
+    The proposal carries the sequence whose projection it uses (2 or 3), so its prior
+    ``W`` is that sequence's: the paper's S2 gives "bays and storeys".
+
+    Examples
+    --------
+    >>> t = np.tile(np.linspace(0, 10, 101), 60)
+    >>> z = np.repeat(np.linspace(0, 5.9, 60), 101)
+    >>> solid = (np.abs(z - 3.0) < 0.35) | (np.abs(t % 2.0 - 1.0) > 0.6)  # a band at 3 m
+    >>> xyz = np.column_stack([t, np.zeros_like(t), z])[solid]
+    >>> prop = storeys(xyz)
+    >>> prop.sequence, prop.n_children, [round(float(c), 1) for c in prop.cuts]
+    (2, 2, [3.0])
+    """
+    a = _as_xyz(xyz)
+    params = params or SequenceParams()
+    if len(a) < params.min_points:
+        return None
+    pz = u(a, curve) if curve is not None else h(a)
+    seq = 3 if curve is not None else 2
+    return _finish(seq, pz[:, 1], occupancy_cut(pz[:, 1], pz[:, 0], params), params, curve)
+
+
+def occupancy_cut(x: FloatArray, y: FloatArray, params: SequenceParams) -> FloatArray:
+    """Cuts along ``x`` at the peaks of the wall's occupancy: how many cells of
+    ``params.cell`` x ``params.cell`` in the ``(x, y)`` projection hold a point, per
+    position along ``x``.
+
+    A plain count follows the scan's density, which is highest near each station, so
+    on a wall scanned from a few stations its peaks are the stations, not the piers.
+    The occupancy counts each cell once: a pier (solid over the wall's height) is a
+    peak and an opening a valley wherever the points are at least a cell apart, and a
+    plain wall has no peaks at all. The fine histogram has one bin per cell (16 to
+    1024 bins); ``v2`` and ``rho`` do the rest. ``params.cell`` 0 counts points.
+    """
+    kw = dict(sigma=params.sigma, bins_per_crossing=params.bins_per_crossing)
+    if params.cell <= 0 or len(x) == 0:
+        return rho(v2(x, statistic="count", **kw), prominence=params.prominence)  # type: ignore[arg-type]
+    x0, y0 = float(x.min()), float(y.min())
+    kx = ((x - x0) * (1.0 / params.cell)).astype(np.int64)
+    ky = ((y - y0) * (1.0 / params.cell)).astype(np.int64)
+    _, first = np.unique(kx * (int(ky.max()) + 1) + ky, return_index=True)
+    n_fine = int(np.clip(np.ceil((float(x.max()) - x0) / params.cell), 16, 1024))
+    hist = v2(x[first], statistic="count", n_fine=n_fine, **kw)  # type: ignore[arg-type]
+    return rho(hist, prominence=params.prominence)
 
 
 def propose(xyz: npt.ArrayLike, *, params: SequenceParams | None = None,
             rng: RngLike = None) -> dict[int, Proposal | None]:
-    """All three proposals for one node, ``{1: S1, 2: S2, 3: S3}`` (one ``psi`` fit shared
-    by S1 and S3)."""
+    """Every proposal for one node, ``{1: S1, 2: S2, 3: S3, 4: storeys}`` (one ``psi`` fit
+    shared by S1, S3 and the storeys; the storeys' ``Proposal.sequence`` is 2 or 3)."""
     a = _as_xyz(xyz)
     params = params or SequenceParams()
     curve: TransportCurve | None = None
@@ -273,4 +339,5 @@ def propose(xyz: npt.ArrayLike, *, params: SequenceParams | None = None,
         1: s1(a, params=params, curve=curve) if curve is not None else None,
         2: s2(a, params=params),
         3: s3(a, params=params, curve=curve) if curve is not None else None,
+        4: storeys(a, params=params, curve=curve) if params.storeys else None,
     }
