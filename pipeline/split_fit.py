@@ -43,7 +43,7 @@ def training_groups(i: int, work: Path) -> Path:
     from pipeline.tree_stage import group_starts
     from pipeline.workflow import load_workflow
     from scenes.scanner import ScanParams
-    from scenes.synth import write_scan
+    from scenes.synth import sidecar_path, write_scan
     from tiling.readers import probe, read_blocks
     from tiling.store import RunStore
 
@@ -75,6 +75,7 @@ def training_groups(i: int, work: Path) -> Path:
                         recipe=recipe)
     tmp.replace(out)
     laz.unlink()
+    sidecar_path(laz).unlink(missing_ok=True)
     shutil.rmtree(url, ignore_errors=True)
     return out
 
