@@ -2,10 +2,12 @@
 
 - :mod:`tree.operators`: ``v1``, ``psi`` (circle and n-gon RANSAC), ``p``, ``u``, ``h``,
   ``v2``, ``rho`` as pure NumPy/SciPy kernels;
-- :mod:`tree.sequences`: ``S1``, ``S2``, ``S3`` proposing splits of one node;
+- :mod:`tree.sequences`: ``S1``, ``S2``, ``S3`` and the storeys proposing splits of one node;
 - :mod:`tree.energy`: ``e1``..``e5``, ``xi = w . e`` and the versioned energy model;
 - :mod:`tree.build`: Algorithm 1 on one segment (:func:`build_tree`);
-- :mod:`tree.fit`: the regression of ``w`` and the prior ``W`` on synthetic scenes.
+- :mod:`tree.split`: the learned split decision (the pipeline's default) and its model file;
+- :mod:`tree.fit`: the regression of ``w`` and the prior ``W`` on synthetic scenes;
+- :mod:`tree.fit_split`: the fit of the split model.
 
 The per-segment Dask tasks and the CLI live in ``pipeline/``.
 """
@@ -23,7 +25,8 @@ from tree.energy import (
     load_energy_model,
 )
 from tree.operators import TransportCurve, fit_circle, fit_ngon, h, p, psi, rho, u, v1, v2
-from tree.sequences import Proposal, SequenceParams, propose, s1, s2, s3
+from tree.sequences import Proposal, SequenceParams, propose, s1, s2, s3, storeys
+from tree.split import SplitModel, load_split_model, split_features
 
 __all__ = [
     "Classifier",
@@ -31,6 +34,7 @@ __all__ = [
     "NodeTable",
     "Proposal",
     "SequenceParams",
+    "SplitModel",
     "TransportCurve",
     "TreeResult",
     "build_tree",
@@ -44,6 +48,7 @@ __all__ = [
     "fit_ngon",
     "h",
     "load_energy_model",
+    "load_split_model",
     "p",
     "propose",
     "psi",
@@ -51,6 +56,8 @@ __all__ = [
     "s1",
     "s2",
     "s3",
+    "split_features",
+    "storeys",
     "u",
     "v1",
     "v2",
