@@ -24,7 +24,7 @@ from tiling.classes import ELEMENT_CLASSES
 from tree.energy import Classifier, EnergyModel, energy_terms, load_energy_model
 from tree.operators import RngLike
 from tree.sequences import Proposal, SequenceParams, propose
-from tree.split import SplitModel, split_features
+from tree.split import N_PROBS, SplitModel, split_features
 
 __all__ = ["NodeTable", "TreeResult", "build_tree"]
 
@@ -213,7 +213,7 @@ def build_tree(
     prior = model.W
 
     n = len(a)
-    cls0, sc0, pr0 = _classify(classifier, [a]) if n else (np.array([0]), np.array([0.0]), np.zeros((1, 8)))
+    cls0, sc0, pr0 = _classify(classifier, [a]) if n else (np.array([0]), np.array([0.0]), np.zeros((1, N_PROBS)))
     probs: list[FloatArray] = [pr0[0]]
     parent, depth, seq, xi, cls, score, npts = [-1], [0], [0], [np.nan], [int(cls0[0])], [float(sc0[0])], [n]
     terms: list[FloatArray] = [np.full(5, np.nan)]

@@ -40,7 +40,7 @@ import numpy.typing as npt
 
 from tiling.classes import CLASS_NAMES, ELEMENT_CLASSES, NUM_CLASSES
 
-__all__ = ["DEFAULT_SPLIT_PATH", "FEATURE_NAMES", "SplitModel", "load_split_model", "split_features"]
+__all__ = ["DEFAULT_SPLIT_PATH", "FEATURE_NAMES", "N_PROBS", "SplitModel", "load_split_model", "split_features"]
 
 FloatArray = npt.NDArray[np.float64]
 
