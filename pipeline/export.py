@@ -187,6 +187,7 @@ def _sample(store: RunStore, n_max: int, seed: int = 0) -> tuple[np.ndarray, np.
     scale, offset = np.asarray(attrs["coords"]["scale"]), np.asarray(attrs["coords"]["offset"])
     tiles = [int(t) for t in attrs["ingest"]["tiles"]]
     recs = store.records("ingest")
+    parts = store.records("labels_tiles")
     total = max(1, sum(int(recs[str(t)]["n_core"]) for t in tiles))
     rng = np.random.default_rng(seed)
     xyz_all, cls_all = [], []
@@ -195,9 +196,18 @@ def _sample(store: RunStore, n_max: int, seed: int = 0) -> tuple[np.ndarray, np.
         core = np.flatnonzero(d["core"])
         k = min(len(core), int(np.ceil(n_max * len(core) / total)))
         pick = np.sort(rng.choice(core, size=k, replace=False)) if k < len(core) else core
-        part_index = store.read_slice(f"labels/parts/{t}/index")
-        at = np.searchsorted(part_index, d["index"][pick])
-        cls_all.append(store.read_slice(f"labels/parts/{t}/class")[at])
+        want = d["index"][pick]
+        cls = np.zeros(len(pick), np.uint8)
+        todo = np.ones(len(pick), bool)
+        for j in range(len(parts[str(t)]["parts"])):  # the part that holds each point
+            if not todo.any():  # kept points are in the first parts; dropped ones after
+                break
+            part_index = store.read_slice(f"labels/parts/{t}/{j}/index")
+            at = np.minimum(np.searchsorted(part_index, want), max(len(part_index) - 1, 0))
+            found = todo & (part_index[at] == want) if len(part_index) else np.zeros(len(want), bool)
+            cls[found] = store.read_slice(f"labels/parts/{t}/{j}/class")[at[found]]
+            todo &= ~found
+        cls_all.append(cls)
         xyz_all.append(d["xyz"][pick] * scale + offset)
     if not xyz_all:
         return np.zeros((0, 3)), np.zeros(0, np.uint8)

@@ -6,8 +6,10 @@ Two phases of Dask tasks, each unit recorded after its data like every other sta
    and global segment (coarse stage) and their tree leaf, class, instance and score (tree
    stage, found through the row's CSR position); points dropped by voxel downsampling take
    their representative's labels (the representative is a core row of the same tile).
-   The rows are sorted by original index and written to ``labels/parts/<tile>``; the
-   record keeps, for every output range, which rows of the part fall in it.
+   The points are written as parts of at most ``PART_ROWS`` points, each sorted by
+   original index (``labels/parts/<tile>/<j>``), so the task's memory does not grow with
+   the tile; the record keeps, for every part and output range, which rows of the part
+   fall in it.
 2. ``labels: ranges`` (one task per range of ``RANGE_ROWS`` input points, whole chunks):
    the parts' rows of the range are gathered and written to ``labels/<name>`` at their
    original index. Ranges never share a chunk, so tasks never race.
@@ -38,11 +40,15 @@ from tiling.classes import NUM_CLASSES
 from tiling.errors import PipelineError
 from tiling.store import CHUNK_POINTS, RunStore
 
-__all__ = ["LABEL_DTYPES", "RANGE_ROWS", "LEAF_BITS", "run_labels", "labels_tile", "labels_range", "LabelsReport"]
+__all__ = ["LABEL_DTYPES", "RANGE_ROWS", "PART_ROWS", "LEAF_BITS", "run_labels", "labels_tile", "labels_range",
+           "part_rows", "LabelsReport"]
 
 TILE_STAGE = "labels_tiles"
 STAGE = "labels"
 RANGE_ROWS = 4 * CHUNK_POINTS
+#: Points of a tile labelled (and written as one part) at a time: the tile task's memory
+#: follows this, not the tile's size nor the points its voxels dropped.
+PART_ROWS = 2_000_000
 #: ``segment = global coarse segment << LEAF_BITS | tree leaf node id``.
 LEAF_BITS = 20
 LABEL_DTYPES: dict[str, Any] = {
@@ -79,13 +85,12 @@ def _tree_values(store: RunStore, pos: np.ndarray, tree: dict[str, Any]) -> dict
     return out
 
 
-def labels_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, Any]:
-    """Dask task: the labels of one tile's core points (and of their dropped neighbours)."""
-    store = RunStore.open(url, mode="a")
-    pts = store.read_unit(f"tiles/{tile}", ["index", "core"])
-    coarse = store.read_unit(f"coarse/tiles/{tile}", ["primitive", "global", "csr_pos"])
+def _core_labels(store: RunStore, tile: int, start: int, stop: int, cfg: dict[str, Any]
+                 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Original index and labels of the core points among tile rows ``[start, stop)``."""
+    pts = {k: store.read_slice(f"tiles/{tile}/{k}", start, stop) for k in ("index", "core")}
+    coarse = {k: store.read_slice(f"coarse/tiles/{tile}/{k}", start, stop) for k in ("primitive", "global", "csr_pos")}
     core = np.flatnonzero(pts["core"])
-    index = pts["index"][core]
     glob = coarse["global"][core].astype(np.uint64)
     pos = coarse["csr_pos"][core]
     values = {"primitive": coarse["primitive"][core], "class": np.zeros(len(core), np.uint8),
@@ -98,39 +103,76 @@ def labels_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, Any]:
         for k in ("class", "instance", "score"):
             values[k][has] = tv[k]
     values["segment"] = np.where(glob > 0, (glob << np.uint64(LEAF_BITS)) | leaf, 0).astype(np.uint64)
-    # Voxel-dropped points take their representative's labels.
-    if store.has(f"tiles/{tile}/voxel_dropped"):
-        vd = store.read_unit(f"tiles/{tile}", ["voxel_dropped", "voxel_representative"])
-        if len(vd["voxel_dropped"]):
-            order = np.argsort(index)
-            at = order[np.searchsorted(index, vd["voxel_representative"], sorter=order)]
-            if not (index[at] == vd["voxel_representative"]).all():
-                raise PipelineError(f"store {url}: tile {tile} has dropped points without their representative")
-            index = np.concatenate([index, vd["voxel_dropped"]])
-            values = {k: np.concatenate([v, v[at]]) for k, v in values.items()}
+    return pts["index"][core], {k: v.astype(LABEL_DTYPES[k]) for k, v in values.items()}
+
+
+def _write_part(store: RunStore, tile: int, j: int, index: np.ndarray, values: dict[str, np.ndarray],
+                n_points: int) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Write part ``j`` of a tile sorted by original index; return it and its record entry
+    (its length and, per output range it touches, its rows there)."""
     order = np.argsort(index)
-    index = index[order]
-    part = {"index": index, **{k: values[k][order].astype(LABEL_DTYPES[k]) for k in LABEL_DTYPES}}
-    store.write_unit(f"labels/parts/{tile}", part)
-    bounds = np.arange(0, cfg["n_points"] + RANGE_ROWS, RANGE_ROWS)
-    cuts = np.searchsorted(index, bounds.astype(np.uint64))
+    part = {"index": index[order], **{k: values[k][order] for k in LABEL_DTYPES}}
+    store.write_unit(f"labels/parts/{tile}/{j}", part)
+    bounds = np.arange(0, n_points + RANGE_ROWS, RANGE_ROWS)
+    cuts = np.searchsorted(part["index"], bounds.astype(np.uint64))
     ranges = {str(r): [int(cuts[r]), int(cuts[r + 1])] for r in range(len(bounds) - 1) if cuts[r + 1] > cuts[r]}
-    info = {"params_hash": cfg["params_hash"], "n_points": int(len(index)), "ranges": ranges}
+    return part, {"n": int(len(order)), "ranges": ranges}
+
+
+def labels_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, Any]:
+    """Dask task: the labels of one tile's core points (and of their dropped neighbours).
+
+    Written as parts of at most ``PART_ROWS`` points (``labels/parts/<tile>/<j>``), so the
+    task's memory follows that, not the tile. Without voxels the parts are runs of the
+    tile's rows; with voxels part 0 holds every kept core point (the voxel grid bounds
+    them) and the next parts the dropped points, ``PART_ROWS`` at a time, each taking its
+    representative's labels from part 0.
+    """
+    store = RunStore.open(url, mode="a")
+    if store.has(f"labels/parts/{tile}"):  # an interrupted attempt, or another labels run
+        store.delete(f"labels/parts/{tile}")
+    n_rows = store.array_length(f"tiles/{tile}/index")
+    n_dropped = store.array_length(f"tiles/{tile}/voxel_dropped") if store.has(f"tiles/{tile}/voxel_dropped") else 0
+    step = n_rows if n_dropped else PART_ROWS
+    parts = []
+    kept: dict[str, np.ndarray] = {}
+    for start in range(0, max(n_rows, 1), max(step, 1)):
+        index, values = _core_labels(store, tile, start, min(start + step, n_rows), cfg)
+        kept, info = _write_part(store, tile, len(parts), index, values, cfg["n_points"])
+        parts.append(info)
+    for start in range(0, n_dropped, PART_ROWS):
+        stop = min(start + PART_ROWS, n_dropped)
+        dropped = store.read_slice(f"tiles/{tile}/voxel_dropped", start, stop)
+        rep = store.read_slice(f"tiles/{tile}/voxel_representative", start, stop)
+        at = np.minimum(np.searchsorted(kept["index"], rep), max(len(kept["index"]) - 1, 0))
+        if not len(kept["index"]) or not (kept["index"][at] == rep).all():
+            raise PipelineError(f"store {url}: tile {tile} has dropped points without their representative")
+        _, info = _write_part(store, tile, len(parts), dropped, {k: kept[k][at] for k in LABEL_DTYPES},
+                              cfg["n_points"])
+        parts.append(info)
+    info = {"params_hash": cfg["params_hash"], "n_points": int(sum(p["n"] for p in parts)), "parts": parts}
     store.record(TILE_STAGE, str(tile), info)
     return info
 
 
-def labels_range(url: str, r: int, parts: list[tuple[int, int, int]], cfg: dict[str, Any]) -> int:
-    """Dask task: write input points ``[r * RANGE_ROWS, ...)`` of every label array."""
+def part_rows(info: dict[str, Any], tile: int) -> list[tuple[str, int, int, int]]:
+    """``(part group, range, first row, end row)`` of every output range a tile's parts touch."""
+    return [(f"labels/parts/{tile}/{j}", int(r), a, b)
+            for j, part in enumerate(info["parts"]) for r, (a, b) in part["ranges"].items()]
+
+
+def labels_range(url: str, r: int, parts: list[tuple[str, int, int]], cfg: dict[str, Any]) -> int:
+    """Dask task: write input points ``[r * RANGE_ROWS, ...)`` of every label array from
+    ``parts`` (``(part group, first row, end row)``)."""
     store = RunStore.open(url, mode="a")
     start = r * RANGE_ROWS
     stop = min(start + RANGE_ROWS, cfg["n_points"])
     out = {k: np.zeros(stop - start, dtype=dt) for k, dt in LABEL_DTYPES.items()}
     n = 0
-    for tile, a, b in parts:
-        index = store.read_slice(f"labels/parts/{tile}/index", a, b).astype(np.int64) - start
+    for group, a, b in parts:
+        index = store.read_slice(f"{group}/index", a, b).astype(np.int64) - start
         for k in LABEL_DTYPES:
-            out[k][index] = store.read_slice(f"labels/parts/{tile}/{k}", a, b)
+            out[k][index] = store.read_slice(f"{group}/{k}", a, b)
         n += b - a
     for k, values in out.items():
         store.write_slice(f"labels/{k}", start, values)
@@ -163,7 +205,7 @@ def labels_hash(attrs: dict[str, Any], *, use_tree: bool) -> str:
     upstream = stages.get("tree" if use_tree else "coarse", {}).get("params_hash")
     if upstream is None:
         raise PipelineError(f"the {'tree' if use_tree else 'coarse'} stage has not run on this store")
-    return hashlib.sha256(json.dumps(["labels-v1", upstream, use_tree]).encode()).hexdigest()[:16]
+    return hashlib.sha256(json.dumps(["labels-v2", upstream, use_tree]).encode()).hexdigest()[:16]
 
 
 def run_labels(url: str, *, use_tree: bool, runner: Any) -> LabelsReport:
@@ -188,10 +230,10 @@ def run_labels(url: str, *, use_tree: bool, runner: Any) -> LabelsReport:
     results = runner(labels_tile, [(url, t, cfg) for t in todo_t], "labels: tiles")
     for t, info in zip(todo_t, results, strict=True):
         done_t[str(t)] = info
-    parts: dict[int, list[tuple[int, int, int]]] = {}
+    parts: dict[int, list[tuple[str, int, int]]] = {}
     for t in tiles:
-        for r, (a, b) in done_t[str(t)]["ranges"].items():
-            parts.setdefault(int(r), []).append((t, a, b))
+        for group, r, a, b in part_rows(done_t[str(t)], t):
+            parts.setdefault(r, []).append((group, a, b))
     n_ranges = -(-n_points // RANGE_ROWS)
     todo_r = [r for r in range(n_ranges) if str(r) not in done_r]
     runner(labels_range, [(url, r, parts.get(r, []), cfg) for r in todo_r], "labels: ranges")

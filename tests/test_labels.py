@@ -22,13 +22,13 @@ def scan(tmp_path_factory):
     return path
 
 
-def _run(tmp_path, scan, extra="", tree="{enabled: false}"):
+def _run(tmp_path, scan, extra="", tree="{enabled: false}", ingest="{tile_size: 50.0}"):
     tmp_path.mkdir(parents=True, exist_ok=True)
     wf_path = tmp_path / "wf.yaml"
     wf_path.write_text(f"""\
 input: {{files: [{scan}]}}
 store: {tmp_path / 's.zarr'}
-ingest: {{tile_size: 50.0}}
+ingest: {ingest}
 coarse: {{min_support: 300}}
 tree: {tree}
 cluster: {{scheduler: sync}}
@@ -108,3 +108,29 @@ def test_large_groups_are_built_on_a_sample(tmp_path, scan):
         leaf = store.read_slice(f"tree/batches/{b}/leaf")
         assert len(leaf) == n and set(np.unique(leaf).tolist()) <= {i for i, x in enumerate(t["is_leaf"]) if x}
     assert (sampled["class"] == full["class"]).mean() > 0.8
+
+
+@pytest.mark.parametrize("voxel", [None, 0.2])
+def test_labels_in_small_parts_are_the_same(tmp_path, scan, monkeypatch, voxel):
+    """A tile's labels written PART_ROWS points at a time (the stage's memory bound) are
+    the labels of one part per tile, with and without voxel-dropped points."""
+    import pipeline.labels as labels
+
+    ingest = "{tile_size: 50.0}" if voxel is None else f"{{tile_size: 50.0, voxel: {voxel}}}"
+    _, whole = _run(tmp_path / "whole", scan, ingest=ingest)
+    monkeypatch.setattr(labels, "PART_ROWS", 2_000)
+    small_store, small = _run(tmp_path / "small", scan, ingest=ingest)
+    recs = small_store.records("labels_tiles")
+    assert max(len(r["parts"]) for r in recs.values()) > 2  # several parts really written
+    n_dropped = sum(small_store.array_length(f"tiles/{t}/voxel_dropped") for t in small_store.attrs["ingest"]["tiles"]
+                    if small_store.has(f"tiles/{t}/voxel_dropped"))
+    assert (n_dropped > 2_000) == (voxel is not None)
+    for k in LABEL_DTYPES:
+        np.testing.assert_array_equal(small[k], whole[k], err_msg=k)
+    assert (small["segment"] > 0).mean() > 0.3
+    if voxel is None:  # the export's figure finds every core point's class in its part
+        from pipeline.export import _sample
+
+        _, cls = _sample(small_store, n_max=10**9)
+        np.testing.assert_array_equal(np.bincount(cls, minlength=9), np.bincount(small["class"], minlength=9))
+
