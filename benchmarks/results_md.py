@@ -1,7 +1,8 @@
 """Markdown tables for docs/results.md from the JSON of ``hollowtree evaluate``.
 
 Run: ``python benchmarks/results_md.py out/evaluate/evaluate.json``. Prints the Table 1
-comparison with the paper, one table per site and method, and the mean IoU summary.
+comparison with the paper, one table per site and method, and the mean IoU summary (of the
+first seed), then, for a run with ``--seeds N``, the spread over the seeds.
 """
 
 from __future__ import annotations
@@ -60,6 +61,29 @@ def main(path: str) -> None:
         m = {k: v["mean_iou_pct"] for k, v in s["methods"].items()}
         print(f"| {s['name']} | {_f(m['ransac'])} | {_f(m['ransac+dbscan'])} | {_f(m['tree'])} | "
               f"{m['tree'] - m['ransac+dbscan']:+.1f} |")
+
+
+    if "spread" in d:
+        spread(d["spread"])
+
+
+def _r(s: dict, signed: bool = False) -> str:
+    f = "+.1f" if signed else ".1f"
+    return f"{s['mean']:{f}} ({s['min']:{f}} to {s['max']:{f}})"
+
+
+def spread(sp: dict) -> None:
+    """Mean (min to max) over the seeds, per site and over all sites."""
+    print(f"\nOver {sp['n_seeds']} seeds (coarse.seed and tree.seed +0 .. +{sp['n_seeds'] - 1}), "
+          "mean (min to max):\n")
+    print("| site | tree mean IoU % | tree - ransac+dbscan | arches found | domes found | minarets found |")
+    print("| --- | --- | --- | --- | --- | --- |")
+    rows = [*sp["sites"].items(), (f"all {len(sp['sites'])} sites", sp["all"])]
+    for name, s in rows:
+        found = [f"{_r(s['found'][c])} of {s['found'][c]['n_gt']}" if c in s["found"] else "-"
+                 for c in ("arch", "dome", "minaret")]
+        print(f"| {name} | {_r(s['tree_mean_iou_pct'])} | {_r(s['tree_minus_ransac+dbscan'], True)} | "
+              + " | ".join(found) + " |")
 
 
 if __name__ == "__main__":

@@ -292,6 +292,9 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--scheduler", help="Dask scheduler address (overrides cluster.scheduler); 'sync' = in process")
     ev.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY.PATH=VALUE",
                     help="override a workflow value, e.g. --set input.synth.points=200000 (repeatable)")
+    ev.add_argument("--seeds", type=int, default=1, metavar="N",
+                    help="run every input N times, coarse.seed and tree.seed raised by 0..N-1 (a store per "
+                    "seed), and report the spread of the scores (default 1)")
     ev.add_argument("--no-progress", action="store_true", help="no progress bars")
     ev.set_defaults(func=_cmd_evaluate)
 
@@ -402,7 +405,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if args.scheduler:
         overrides.append(f"cluster.scheduler={args.scheduler}")
     evaluate_inputs(args.inputs, workflow=args.workflow, overrides=overrides, store_dir=args.store_dir,
-                    json_path=args.json, png_dir=args.png_dir, progress=not args.no_progress,
+                    json_path=args.json, png_dir=args.png_dir, seeds=args.seeds, progress=not args.no_progress,
                     say=lambda line: print(line, flush=True))
     return 0
 

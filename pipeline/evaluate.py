@@ -33,7 +33,7 @@ import os
 import platform
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -47,7 +47,7 @@ from tiling.readers import SUFFIXES, probe, read_blocks
 from tiling.store import RunStore
 
 __all__ = ["METHODS", "GT_DIMS", "DEFAULT_WORKFLOW", "SiteResult", "evaluate_inputs", "evaluate_store",
-           "format_table", "primitive_groups", "draw_panels"]
+           "format_table", "primitive_groups", "draw_panels", "seed_spread", "format_spread"]
 
 #: The three methods, in the order of the paper's Fig. 1 (b), (c), (d).
 METHODS = ("ransac", "ransac+dbscan", "tree")
@@ -82,9 +82,12 @@ class SiteResult:
     n_segments: int
     n_primitives: int
     pipeline_log: tuple[str, ...] = ()
+    #: ``{"coarse": coarse.seed, "tree": tree.seed}`` of the run, where evaluate ran it
+    seeds: dict[str, int] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"name": self.name, "input": self.input, "store": self.store, "n_points": self.n_points,
+                "seeds": self.seeds,
                 "pipeline_seconds": None if self.pipeline_seconds is None else round(self.pipeline_seconds, 2),
                 "evaluate_seconds": round(self.evaluate_seconds, 2), "pipeline_log": list(self.pipeline_log),
                 "n_segments": self.n_segments, "n_primitives": self.n_primitives,
@@ -361,6 +364,98 @@ def draw_panels(sample: dict[str, np.ndarray], out: Path, *, title: str) -> Path
     return out
 
 
+# ------------------------------------------------------------------------------ seeds
+#: The element classes the spread reports (the paper's Table 1 columns, and pillars).
+SPREAD_CLASSES = tuple(c.label for c in ELEMENT_CLASSES)
+
+
+def _stats(values: Sequence[float]) -> dict[str, Any]:
+    v = [float(x) for x in values]
+    return {"values": v, "mean": sum(v) / len(v), "min": min(v), "max": max(v)}
+
+
+def seed_spread(runs: Sequence[Sequence[SiteResult]]) -> dict[str, Any]:
+    """How much the scores move when only the seeds move.
+
+    ``runs[k]`` holds the results of seed offset ``k`` (the same inputs, in the same
+    order). Per site and over all sites (the mean of the sites' mean IoU; elements found
+    summed): the tree's mean point IoU, that of RANSAC + DBSCAN and their difference, and
+    per element class the instances found and the tree's precision, each as
+    ``{"values": [per seed], "mean", "min", "max"}``; over all sites the precision is
+    pooled (matched over predicted instances of the sites whose ground truth has the
+    class). Classes absent from a site's ground truth and precisions that are undefined
+    (no predicted instance) are left out.
+    """
+    if not runs or not runs[0]:
+        raise ValueError("seed_spread needs at least one run of at least one input")
+    names = [r.name for r in runs[0]]
+    for k, run in enumerate(runs):
+        if [r.name for r in run] != names:
+            raise ValueError(f"run {k} scores {[r.name for r in run]}, run 0 {names}: the same inputs are needed")
+
+    def one(results: Sequence[SiteResult]) -> dict[str, Any]:
+        tree = [r.methods["tree"] for r in results]
+        base = [r.methods["ransac+dbscan"] for r in results]
+        out: dict[str, Any] = {
+            "tree_mean_iou_pct": _stats([e.mean_iou_pct or 0.0 for e in tree]),
+            "ransac+dbscan_mean_iou_pct": _stats([e.mean_iou_pct or 0.0 for e in base]),
+            "tree_minus_ransac+dbscan": _stats([(t.mean_iou_pct or 0.0) - (b.mean_iou_pct or 0.0)
+                                                for t, b in zip(tree, base, strict=True)]),
+            "found": {}, "precision_pct": {},
+        }
+        for c in SPREAD_CLASSES:
+            n_gt = tree[0].score(c).n_gt
+            if n_gt:
+                out["found"][c] = {"n_gt": n_gt, **_stats([e.score(c).n_found for e in tree])}
+            prec = [e.score(c).precision_pct for e in tree]
+            if n_gt and all(p is not None for p in prec):
+                out["precision_pct"][c] = _stats([p for p in prec if p is not None])
+        return out
+
+    sites = {n: one([run[i] for run in runs]) for i, n in enumerate(names)}
+    over: dict[str, Any] = {}
+    for key in ("tree_mean_iou_pct", "ransac+dbscan_mean_iou_pct", "tree_minus_ransac+dbscan"):
+        per_seed = [sum(sites[n][key]["values"][k] for n in names) / len(names) for k in range(len(runs))]
+        over[key] = _stats(per_seed)
+    over["found"], over["precision_pct"] = {}, {}
+    for c in SPREAD_CLASSES:
+        with_c = [i for i, n in enumerate(names) if c in sites[n]["found"]]
+        if with_c:
+            over["found"][c] = {"n_gt": sum(sites[names[i]]["found"][c]["n_gt"] for i in with_c),
+                                **_stats([sum(sites[names[i]]["found"][c]["values"][k] for i in with_c)
+                                          for k in range(len(runs))])}
+            # pooled: matched predicted instances over predicted instances, all sites with the class
+            scores = [[run[i].methods["tree"].score(c) for i in with_c] for run in runs]
+            if all(sum(x.n_pred for x in per) for per in scores):
+                over["precision_pct"][c] = _stats([100.0 * sum(x.n_pred_matched for x in per)
+                                                   / sum(x.n_pred for x in per) for per in scores])
+    return {"n_seeds": len(runs), "sites": sites, "all": over}
+
+
+def _range(s: dict[str, Any], signed: bool = False) -> str:
+    f = "+.1f" if signed else ".1f"
+    return f"{s['mean']:{f}} ({s['min']:{f}} to {s['max']:{f}})"
+
+
+def format_spread(spread: dict[str, Any]) -> str:
+    """The spread as a table: mean (min to max) over the seeds."""
+    n = spread["n_seeds"]
+    plural = {"arch": "arches"}
+    lines = [f"evaluate: over {n} seeds, mean (min to max)",
+             f"  {'site':<12}{'tree mean IoU %':<24}{'tree - ransac+dbscan':<24}"
+             + "".join(f"{plural.get(c, c + 's') + ' found':<28}" for c in SPREAD_CLASSES[:3])]
+    rows = [*spread["sites"].items(), (f"all {len(spread['sites'])}", spread["all"])]
+    for name, s in rows:
+        found = []
+        for c in SPREAD_CLASSES[:3]:
+            f = s["found"].get(c)
+            found.append("-" if f is None else f"{_range(f)} / {f['n_gt']}")
+        lines.append(f"  {name:<12}{_range(s['tree_mean_iou_pct']):<24}"
+                     f"{_range(s['tree_minus_ransac+dbscan'], signed=True):<24}"
+                     + "".join(f"{x:<28}" for x in found))
+    return "\n".join(line.rstrip() for line in lines)
+
+
 # ------------------------------------------------------------------------------ driver
 def _is_store(text: str) -> bool:
     return (Path(text) / "zarr.json").is_file() or ("://" in text and Path(text).suffix.lower() not in SUFFIXES
@@ -389,56 +484,98 @@ def _plan(text: str, store_dir: str) -> tuple[str, str, list[str]]:
                       f"{' and '.join(GT_DIMS)}, or a run store")
 
 
+def _seed_store(store: str, k: int) -> str:
+    """The store of seed offset ``k``: the input's own store for 0, ``<name>-seed<k>.zarr`` beside it after."""
+    return store if k == 0 else f"{store.removesuffix('.zarr')}-seed{k}.zarr"
+
+
 def evaluate_inputs(
     inputs: Sequence[str], *, workflow: str | Path | None = None, overrides: Sequence[str] = (),
     store_dir: str = "out/evaluate", json_path: str | Path | None = None, png_dir: str | Path | None = None,
-    progress: bool = True, say: Callable[[str], None] = print,
+    seeds: int = 1, progress: bool = True, say: Callable[[str], None] = print,
 ) -> tuple[list[SiteResult], Path]:
-    """Run (or read) and score every input; print the tables; write the JSON and PNGs."""
+    """Run (or read) and score every input; print the tables; write the JSON and PNGs.
+
+    With ``seeds`` = N > 1 every input is run N times, with the workflow's ``coarse.seed``
+    and ``tree.seed`` raised by 0 .. N-1 (a store per seed: ``<name>.zarr``, then
+    ``<name>-seed<k>.zarr``), and the JSON gets the other runs (``repeats``) and the
+    spread of the scores over the seeds (``spread``, :func:`seed_spread`). The figures
+    are drawn for the first seed. Returns the first seed's results.
+    """
     from pipeline.run import run_workflow
     from pipeline.workflow import load_workflow
 
+    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
+        raise ConfigError(f"--seeds must be a whole number >= 1; got {seeds!r}")
     wf_path = Path(workflow) if workflow is not None else DEFAULT_WORKFLOW
     plans = [_plan(t, store_dir) for t in inputs]  # every input checked before anything runs
     names = [p[0] for p in plans]
     if len(set(names)) < len(names):
         twice = sorted({n for n in names if names.count(n) > 1})
         raise ConfigError(f"inputs {', '.join(twice)} appear twice (or share a file name); give each input once")
-    wfs = {}
+    if seeds > 1:
+        stores = [t for t, (_, _, extra) in zip(inputs, plans, strict=True) if not extra]
+        if stores:
+            raise ConfigError(f"{stores[0]}: a run store is scored as it is; --seeds {seeds} needs inputs it can "
+                              "run (a site name or a LAS/LAZ file)")
+    wfs: dict[tuple[str, int], Any] = {}
+    seeds_of: dict[tuple[str, int], dict[str, int]] = {}
     for text, (_, store, extra) in zip(inputs, plans, strict=True):
-        if extra:
-            wfs[text] = load_workflow(wf_path, [*overrides, *extra, f"store={json.dumps(store)}", "outputs.las=null",
-                                                "outputs.parquet=null", "outputs.png=null"])
+        if not extra:
+            continue
+        fixed = [*overrides, *extra, "outputs.las=null", "outputs.parquet=null", "outputs.png=null"]
+        base = load_workflow(wf_path, [*fixed, f"store={json.dumps(store)}"])
+        for k in range(seeds):
+            c, t = base.coarse.seed + k, base.tree.seed + k
+            wfs[text, k] = base if k == 0 else load_workflow(wf_path, [
+                *fixed, f"store={json.dumps(_seed_store(store, k))}", f"coarse.seed={c}", f"tree.seed={t}"])
+            seeds_of[text, k] = {"coarse": c, "tree": t}
     first_store = plans[0][1]
     default_dir = Path(first_store).parent if "://" not in first_store else Path(".")
     default_name = f"{plans[0][0]}.json" if len(plans) == 1 else "evaluate.json"
     json_out = Path(json_path) if json_path is not None else default_dir / default_name
     png_out = Path(png_dir) if png_dir is not None else json_out.parent
-    results = []
-    for k, (text, (name, store, _)) in enumerate(zip(inputs, plans, strict=True)):
-        say(f"evaluate: [{k + 1}/{len(inputs)}] {name}")
-        seconds, log = None, []
-        if text in wfs:
-            if "://" not in store:
-                Path(store).parent.mkdir(parents=True, exist_ok=True)
+    runs: list[list[SiteResult]] = []
+    for k in range(seeds):
+        results: list[SiteResult] = []
+        runs.append(results)
+        for i, (text, (name, store, _)) in enumerate(zip(inputs, plans, strict=True)):
+            step = f"{i + 1}/{len(inputs)}" if seeds == 1 else f"{k * len(inputs) + i + 1}/{seeds * len(inputs)}"
+            seed_note = "" if seeds == 1 else f" (seeds +{k})"
+            say(f"evaluate: [{step}] {name}{seed_note}")
+            seconds, log = None, []
+            store_k = _seed_store(store, k)
+            if (text, k) in wfs:
+                if "://" not in store_k:
+                    Path(store_k).parent.mkdir(parents=True, exist_ok=True)
 
-            def say_site(line: str, n: str = name) -> None:
-                say(f"  {n}: {line}")
+                def say_site(line: str, n: str = name) -> None:
+                    say(f"  {n}: {line}")
 
-            report = run_workflow(wfs[text], progress=progress, say=say_site)
-            seconds, log = (None if report.nothing_to_do else report.seconds), report.lines
-        result, sample = evaluate_store(RunStore.open(store), name=name, input_=text, pipeline_seconds=seconds,
-                                        pipeline_log=log, say=say)
-        png_out.mkdir(parents=True, exist_ok=True)
-        png = draw_panels(sample, png_out / f"{name}.png", title=name)
-        say(format_table(result))
-        say(f"evaluate: {name}: figure {png}")
-        results.append(result)
-        _write_json(json_out, {
-            "hollowtree_evaluate": 1, "date": _dt.datetime.now().isoformat(timespec="seconds"),
-            "workflow": str(wf_path), "overrides": list(overrides), "machine": {
-                "cpus": os.cpu_count(), "platform": platform.platform()},
-            "iou_threshold": 0.5, "matching": "greedy one-to-one by IoU (equals Hungarian at IoU >= 0.5)",
-            "sites": [r.to_dict() for r in results]})
+                report = run_workflow(wfs[text, k], progress=progress, say=say_site)
+                seconds, log = (None if report.nothing_to_do else report.seconds), report.lines
+            result, sample = evaluate_store(RunStore.open(store_k), name=name, input_=text, pipeline_seconds=seconds,
+                                            pipeline_log=log, say=say)
+            result = replace(result, seeds=seeds_of.get((text, k)))
+            say(format_table(result))
+            if k == 0:
+                png_out.mkdir(parents=True, exist_ok=True)
+                png = draw_panels(sample, png_out / f"{name}.png", title=name)
+                say(f"evaluate: {name}: figure {png}")
+            results.append(result)
+            complete = [r for r in runs if len(r) == len(inputs)]
+            payload: dict[str, Any] = {
+                "hollowtree_evaluate": 1, "date": _dt.datetime.now().isoformat(timespec="seconds"),
+                "workflow": str(wf_path), "overrides": list(overrides), "machine": {
+                    "cpus": os.cpu_count(), "platform": platform.platform()},
+                "iou_threshold": 0.5, "matching": "greedy one-to-one by IoU (equals Hungarian at IoU >= 0.5)",
+                "seeds": seeds, "sites": [r.to_dict() for r in runs[0]]}
+            if seeds > 1:
+                payload["repeats"] = [[r.to_dict() for r in run] for run in runs[1:]]
+                if len(complete) > 1:
+                    payload["spread"] = seed_spread(complete)
+            _write_json(json_out, payload)
+    if seeds > 1:
+        say(format_spread(seed_spread(runs)))
     say(f"evaluate: {json_out}")
-    return results, json_out
+    return runs[0], json_out

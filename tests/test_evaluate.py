@@ -169,7 +169,8 @@ def evaluated(tmp_path_factory):
     d = tmp_path_factory.mktemp("ev")
     proc = _cli("evaluate", "dome", "--store-dir", str(d / "stores"), "--json", str(d / "ev.json"), "--png-dir", str(d),
                 "--scheduler", "sync", "--no-progress", "--set", "input.synth.points=60000",
-                "--set", f"input.synth.out={d}/{{site}}-{{points}}.laz", "--set", "coarse.min_support=300")
+                "--set", f"input.synth.out={d}/{{site}}-{{points}}.laz", "--set", "coarse.min_support=300",
+                "--seeds", "2")
     assert proc.returncode == 0, proc.stderr
     return d, proc, json.loads((d / "ev.json").read_text())
 
@@ -206,6 +207,75 @@ def test_evaluate_existing_store_reads_without_rerunning(evaluated, tmp_path):
     assert again["pipeline_seconds"] is None
     assert again["methods"] == out["sites"][0]["methods"]
     assert (tmp_path / "dome.png").is_file()
+
+
+@pytest.mark.slow
+def test_evaluate_seeds_runs_each_input_once_per_seed(evaluated):
+    d, proc, out = evaluated
+    assert out["seeds"] == 2
+    (first,), ((second,),) = out["sites"], out["repeats"]
+    assert first["seeds"] == {"coarse": 0, "tree": 0}
+    assert second["seeds"] == {"coarse": 1, "tree": 1}
+    assert first["store"].endswith("dome.zarr") and second["store"].endswith("dome-seed1.zarr")
+    assert (d / "stores" / "dome-seed1.zarr").is_dir()
+    spread = out["spread"]["sites"]["dome"]
+    ious = [s["methods"]["tree"]["mean_iou_pct"] for s in (first, second)]
+    assert spread["tree_mean_iou_pct"]["values"] == pytest.approx(ious)
+    assert spread["found"]["dome"]["values"] == [s["methods"]["tree"]["classes"]["dome"]["n_found"]
+                                                 for s in (first, second)]
+    assert "over 2 seeds" in proc.stdout
+
+
+def test_seed_spread_by_hand():
+    from pipeline.evaluate import SiteResult, format_spread, seed_spread
+
+    gc = np.array([GROUND] * 4 + [DOME] * 4 + [DOME] * 4)
+    gi = np.array([1] * 4 + [2] * 4 + [3] * 4)
+    right = evaluate_labels(gc, gi, gc, gi)  # everything right: 100 %
+    one_dome = evaluate_labels(gc, gi, gc, np.array([1] * 4 + [2] * 8))  # the domes merged: 1 found
+    wrong = evaluate_labels(gc, gi, np.full(12, GROUND), np.ones(12, np.int64))  # all ground
+
+    def site(name, tree, base):
+        return SiteResult(name=name, input=name, store="", n_points=12, pipeline_seconds=None, evaluate_seconds=0.0,
+                          methods={"ransac": base, "ransac+dbscan": base, "tree": tree}, n_segments=1, n_primitives=1)
+
+    runs = [[site("a", right, wrong), site("b", one_dome, wrong)],
+            [site("a", one_dome, wrong), site("b", one_dome, one_dome)]]
+    s = seed_spread(runs)
+    assert s["n_seeds"] == 2
+    a = s["sites"]["a"]
+    assert a["tree_mean_iou_pct"]["values"] == [100.0, 100.0]  # classes right either way
+    assert a["found"]["dome"] == {"n_gt": 2, "values": [2.0, 1.0], "mean": 1.5, "min": 1.0, "max": 2.0}
+    assert a["precision_pct"]["dome"]["values"] == [100.0, 100.0]
+    assert "arch" not in a["found"]  # no arch in the ground truth
+    b = s["sites"]["b"]
+    assert b["tree_minus_ransac+dbscan"]["values"] == pytest.approx([100.0 - wrong.mean_iou_pct, 0.0])
+    assert s["all"]["found"]["dome"] == {"n_gt": 4, "values": [3.0, 2.0], "mean": 2.5, "min": 2.0, "max": 3.0}
+    assert s["all"]["precision_pct"]["dome"]["values"] == [100.0, 100.0]
+    false_dome = evaluate_labels(gc, gi, np.full(12, DOME), np.array([9] * 4 + [2] * 4 + [3] * 4))
+    pooled = seed_spread([[site("a", false_dome, wrong), site("b", one_dome, wrong)]])["all"]["precision_pct"]
+    assert pooled["dome"]["values"] == pytest.approx([100 * 3 / 4])  # (2 + 1) matched of (3 + 1) predicted
+    assert s["all"]["tree_minus_ransac+dbscan"]["values"] == pytest.approx(
+        [100.0 - wrong.mean_iou_pct, (100.0 - wrong.mean_iou_pct) / 2])
+    text = format_spread(s)
+    assert "over 2 seeds" in text and "2.5 (2.0 to 3.0) / 4" in text
+    with pytest.raises(ValueError, match="same inputs"):
+        seed_spread([runs[0], runs[1][:1]])
+
+
+def test_seeds_with_a_run_store_is_one_line_exit_2(tmp_path):
+    store = tmp_path / "s.zarr"
+    store.mkdir()
+    (store / "zarr.json").write_text("{}")
+    proc = _cli("evaluate", str(store), "--seeds", "3")
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert str(store) in lines[0] and "--seeds 3" in lines[0]
+    proc = _cli("evaluate", "dome", "--seeds", "0", "--store-dir", str(tmp_path / "x"))
+    assert proc.returncode == 2
+    assert "--seeds" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "x").exists()
 
 
 def test_las_without_ground_truth_is_one_line_exit_2(tmp_path):
