@@ -209,8 +209,9 @@ def test_cli_started_dask_cluster_matches_local(reference, scan, tmp_path, dask_
     store = str(tmp_path / "c.zarr")
     wf = REPO / "workflows" / "cluster.yaml"
     proc = _cli("run", str(wf), "--no-progress", "--scheduler", address, "--set", f"input.files=[{scan}]",
-                "--set", f"store={store}", "--set", "ingest.tile_size=50.0", "--set", "coarse.min_support=300",
-                "--set", "tree.batch_points=40000", "--set", f"outputs.parquet={tmp_path / 't'}")
+                "--set", f"store={store}", "--set", "ingest.tile_size=50.0", "--set", "ingest.voxel=null",
+                "--set", "coarse.min_support=300", "--set", "tree.batch_points=40000",
+                "--set", f"outputs.parquet={tmp_path / 't'}")
     assert proc.returncode == 0, proc.stderr
     _same(_labels(store), reference["labels"])
 

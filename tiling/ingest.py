@@ -77,8 +77,8 @@ class IngestParams:
     tile_size : float or None
         Side of a tile's core, metres. None (the default, ``--tile-size auto``) picks the
         side from the inputs' extent and point count so that an average tile holds about
-        ``tile_points`` points (a multiple of 5 m, at least 5 m): the reduce phase holds
-        one tile in memory, so this keeps its memory independent of the scan's size.
+        ``tile_points`` points (a multiple of 5 m, at least 5 m; with ``voxel``, counting at
+        most the points the voxel grid can keep, :func:`auto_tile_size`).
     tile_points : int
         Target points per tile for the automatic tile size (default 2 000 000).
     buffer : float
@@ -185,10 +185,20 @@ class IngestPlan:
         }
 
 
-def auto_tile_size(width: float, depth: float, n_points: int, *, tile_points: int, buffer: float) -> float:
+#: For the automatic tile size with a voxel: a scan keeps at most about this many times its
+#: x-y footprint's area in surfaces (ground, walls, roofs) of one point per voxel face. It
+#: bounds the points a voxel grid keeps, so a very dense scan does not get tiles far
+#: smaller than its kept points need; it sets only the tile size, never a label.
+SURFACE_PER_FOOTPRINT = 2.0
+
+
+def auto_tile_size(width: float, depth: float, n_points: int, *, tile_points: int, buffer: float,
+                   voxel: float | None = None) -> float:
     """Tile side (metres) for which an average tile holds about ``tile_points`` points.
 
-    A multiple of 5 m, at least 5 m and more than twice the buffer.
+    A multiple of 5 m, at least 5 m and more than twice the buffer. With ``voxel`` the
+    points counted are at most those the voxel grid can keep
+    (``SURFACE_PER_FOOTPRINT * area / voxel**2``).
 
     Examples
     --------
@@ -196,8 +206,14 @@ def auto_tile_size(width: float, depth: float, n_points: int, *, tile_points: in
     55.0
     >>> auto_tile_size(140.0, 100.0, 100_000_000, tile_points=2_000_000, buffer=2.0)
     20.0
+    >>> auto_tile_size(140.0, 100.0, 1_000_000_000, tile_points=2_000_000, buffer=2.0)
+    10.0
+    >>> auto_tile_size(140.0, 100.0, 1_000_000_000, tile_points=2_000_000, buffer=2.0, voxel=0.02)
+    20.0
     """
     area = max(width, 1.0) * max(depth, 1.0)
+    if voxel:
+        n_points = min(n_points, int(SURFACE_PER_FOOTPRINT * area / voxel**2))
     side = math.sqrt(area * tile_points / max(n_points, 1))
     side = max(5.0, 5.0 * math.ceil(side / 5.0))
     while side <= 2 * buffer:
@@ -268,7 +284,7 @@ def plan_ingest(inputs: Sequence[str | Path], params: IngestParams) -> IngestPla
     if tile_size is None:
         tile_size = auto_tile_size(
             float(hi[0] - lo[0]), float(hi[1] - lo[1]), sum(s.point_count for s in sources),
-            tile_points=params.tile_points, buffer=params.buffer,
+            tile_points=params.tile_points, buffer=params.buffer, voxel=params.voxel,
         )
     grid = TileGrid.covering(lo[0], lo[1], hi[0], hi[1], tile_size=tile_size, buffer=params.buffer)
 
