@@ -5,7 +5,8 @@ then runs ``hollowtree run`` on the bundled default workflow with the input, the
 and the outputs overridden, as a child command whose processes (the local Dask cluster's
 workers included) are sampled every 0.2 s. Per stage (the lines the run prints as each
 stage ends) it reports seconds, input points per second per core, the peak resident
-memory of the largest single process and of all processes together. At the end it prints
+memory of the largest single process, of all processes together and of the driver (the
+``hollowtree run`` process itself, which stitches). At the end it prints
 the issue's two ratios, measured side by side in this one run:
 
 - time per point at the largest size over time per point at the smallest (linear = 1);
@@ -43,15 +44,20 @@ def measure(cmd: list[str]) -> tuple[int, float, list[dict[str, float]]]:
     child = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                              env=dict(os.environ, PYTHONPATH=str(REPO)))
     ps = psutil.Process(child.pid)
-    peak = {"max": 0, "sum": 0}
+    peak = {"max": 0, "sum": 0, "driver": 0}
     lock = threading.Lock()
     stop = threading.Event()
 
     def sample() -> None:
         while not stop.is_set():
             m, s = tree_rss(ps)
+            try:
+                d = ps.memory_info().rss
+            except psutil.NoSuchProcess:
+                d = 0
             with lock:
                 peak["max"], peak["sum"] = max(peak["max"], m), max(peak["sum"], s)
+                peak["driver"] = max(peak["driver"], d)
             time.sleep(0.2)
 
     th = threading.Thread(target=sample, daemon=True)
@@ -66,8 +72,8 @@ def measure(cmd: list[str]) -> tuple[int, float, list[dict[str, float]]]:
             now = time.perf_counter()
             with lock:
                 rows.append({"stage": name, "seconds": now - last, "peak_process": peak["max"],
-                             "peak_sum": peak["sum"]})
-                peak["max"], peak["sum"] = 0, 0
+                             "peak_sum": peak["sum"], "peak_driver": peak["driver"]})
+                peak["max"], peak["sum"], peak["driver"] = 0, 0, 0
             last = now
         elif name in STAGES:  # a second line of the same stage (outputs)
             now = time.perf_counter()
@@ -75,6 +81,8 @@ def measure(cmd: list[str]) -> tuple[int, float, list[dict[str, float]]]:
                 rows[-1]["seconds"] += now - last
                 rows[-1]["peak_process"] = max(rows[-1]["peak_process"], peak["max"])
                 rows[-1]["peak_sum"] = max(rows[-1]["peak_sum"], peak["sum"])
+                rows[-1]["peak_driver"] = max(rows[-1]["peak_driver"], peak["driver"])
+                peak["max"], peak["sum"], peak["driver"] = 0, 0, 0
             last = now
     child.wait()
     stop.set()
@@ -120,12 +128,14 @@ def main() -> None:
         shutil.rmtree(store, ignore_errors=True)
 
     print(f"\nmachine: {cores} cores, {psutil.virtual_memory().total / 2**30:.0f} GiB")
-    print(f"{'points':>12} {'stage':<8}{'s':>9}{'pts/s/core':>12}{'peak proc MB':>14}{'peak sum MB':>13}")
+    print(f"{'points':>12} {'stage':<8}{'s':>9}{'pts/s/core':>12}{'peak proc MB':>14}{'peak sum MB':>13}"
+          f"{'driver MB':>11}")
     for r in results:
         for row in r["stages"]:
             rate = r["points"] / row["seconds"] / cores if row["seconds"] > 0 else float("inf")
             print(f"{r['points']:>12,} {row['stage']:<8}{row['seconds']:>9.1f}{rate:>12,.0f}"
-                  f"{row['peak_process'] / 2**20:>14.0f}{row['peak_sum'] / 2**20:>13.0f}")
+                  f"{row['peak_process'] / 2**20:>14.0f}{row['peak_sum'] / 2**20:>13.0f}"
+                  f"{row['peak_driver'] / 2**20:>11.0f}")
         peak = max(x["peak_process"] for x in r["stages"])
         print(f"{r['points']:>12,} {'total':<8}{r['wall_s']:>9.1f}{r['points'] / r['wall_s']:>12,.0f} pts/s "
               f"(all cores); peak process {peak / 2**20:.0f} MB")

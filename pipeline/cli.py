@@ -163,10 +163,10 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--epsilon", type=_float, default=0.03, help="RANSAC distance, metres (default 0.03)")
     c.add_argument("--alpha", type=_float, default=20.0, help="RANSAC normal angle, degrees (default 20)")
     c.add_argument("--cluster-epsilon", type=_float,
-                   help="RANSAC bitmap cell, metres (default: max(0.15, 2 x point spacing))")
+                   help="RANSAC bitmap cell, metres (default: max(0.15, 2/3 x the automatic eps))")
     c.add_argument("--min-support", type=_positive_int, default=1000,
                    help="smallest primitive, points (default 1000)")
-    c.add_argument("--eps", type=_float, help="DBSCAN radius, metres (default: 3 x point spacing)")
+    c.add_argument("--eps", type=_float, help="DBSCAN radius, metres (default: 9 x the scan's 25 %% 8-NN spacing)")
     c.add_argument("--min-samples", type=_positive_int, default=10, help="DBSCAN core threshold")
     c.add_argument("--no-free-segments", action="store_true",
                    help="leave points that no primitive explains unsegmented (default: DBSCAN them too)")

@@ -32,7 +32,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from primitives.blocks import block_context, split_blocks
-from primitives.dbscan import dbscan_segments, default_eps, sparse_points
+from primitives.dbscan import dbscan_segments, sparse_points, window_spacing
 from primitives.group import segment_contacts
 from primitives.normals import estimate_normals
 from primitives.ransac import RansacParams, efficient_ransac
@@ -65,11 +65,12 @@ class CoarseParams:
         default minimum support is 1000 points (small primitives cost most of the time
         and the tree splits segments further anyway).
     cluster_epsilon : float or None
-        RANSAC's bitmap cell; None = max(0.15 m, 2 x the median point spacing), computed
+        RANSAC's bitmap cell; None = max(0.15 m, 2/3 of the automatic eps), computed
         once per store, so sparse far surfaces are not shattered into bitmap islands.
     eps : float or None
-        DBSCAN radius (metres); None = 3 x the median 8-NN spacing of a sample of the
-        scan, computed once for the whole store so every tile uses the same value.
+        DBSCAN radius (metres); None = ``EPS_FACTOR`` (9) x the 25 % quantile of the
+        8-NN spacing over windows of the whole scan (:func:`scan_spacing`), computed once
+        for the whole store so every tile uses the same value.
     min_samples : int
         DBSCAN core threshold.
     free_segments : bool
@@ -134,7 +135,7 @@ class CoarseParams:
     sparse_factor: float = 2.0
     group_gap: float = 0.6
     group_min_contacts: int = 3
-    group_max_plane: float = 8.0
+    group_max_plane: float = 6.0
 
     def __post_init__(self) -> None:
         if not (isinstance(self.sparse_factor, (int, float)) and math.isfinite(self.sparse_factor)
@@ -613,13 +614,16 @@ class CoarseReport:
     n_unsegmented: int
     n_no_normal: int
     seconds: float
+    eps: float = float("nan")
+    stitch_seconds: float = 0.0
 
     def summary(self) -> str:
         return (
             f"{self.store}: {self.n_segments:,} global segments from {self.n_tile_segments:,} "
             f"tile segments in {self.n_tiles} tiles ({self.tiles_run} run, {self.tiles_skipped} "
             f"skipped); {self.n_unsegmented:,} point copies unsegmented, {self.n_no_normal:,} "
-            f"without a normal; {self.seconds:.1f} s"
+            f"without a normal; DBSCAN eps {self.eps:.3f} m; {self.seconds:.1f} s (stitch "
+            f"{self.stitch_seconds:.1f} s)"
         )
 
 
@@ -874,6 +878,73 @@ def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tupl
     return n_segments, len(keys)
 
 
+# The automatic DBSCAN eps (docs/method.md, "The DBSCAN eps"): EPS_FACTOR x the
+# EPS_QUANTILE of the 8-NN spacing, measured on SPACING_WINDOWS windows of WINDOW_ROWS
+# consecutive (Morton-sorted, so compact) rows drawn over the whole scan.
+EPS_QUANTILE = 0.25
+EPS_FACTOR = 9.0
+# The version of the stage's code where it changes a result (recorded with a run's
+# workflow, so a rerun after such a change redoes the stage). coarse-v2: the eps rule above.
+COARSE_ALGORITHM = "coarse-v2"
+SPACING_WINDOWS = 1024
+WINDOW_ROWS = 1024
+
+
+def scan_spacing(store: RunStore, sizes: dict[int, int], *, seed: int = 0) -> float | None:
+    """The scan's point spacing for the automatic eps: the ``EPS_QUANTILE`` of the 8-NN
+    distance over ``SPACING_WINDOWS`` windows of ``WINDOW_ROWS`` consecutive tile rows,
+    whose starts are drawn uniformly over all the scan's kept points (``sizes``: points
+    per tile), so a tile is measured in proportion to its points. Tile rows are
+    Morton-sorted, so a window is a compact piece of surface and a point's neighbours are
+    its true neighbours. Reads only the windows (a few MB), never a whole tile. None when
+    the scan is too small to measure (fewer than 9 points).
+
+    Raises
+    ------
+    ConfigError
+        If the windows hold no measurable point or the spacing is 0 (duplicate points):
+        the message says to set ``coarse.eps`` by hand.
+    """
+    tiles = sorted(t for t, n in sizes.items() if n > 0)
+    if sum(sizes[t] for t in tiles) <= 8:
+        return None
+    counts = np.array([sizes[t] for t in tiles], dtype=np.int64)
+    cum = np.r_[0, np.cumsum(counts)]
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 8]))
+    picks = rng.integers(0, int(cum[-1]), size=SPACING_WINDOWS)
+    starts = set()
+    for p in picks.tolist():
+        i = int(np.searchsorted(cum, p, side="right")) - 1
+        n, r = int(counts[i]), p - int(cum[i])
+        starts.add((tiles[i], max(0, min(r - WINDOW_ROWS // 2, n - WINDOW_ROWS))))
+    scale = np.asarray(store.attrs["coords"]["scale"])
+
+    def windows() -> Any:
+        # Windows in row order; each chunk of the tile's arrays is read (decoded) once.
+        cached: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+        for t, a in sorted(starts):
+            b = min(sizes[t], a + WINDOW_ROWS)
+            parts = []
+            for c in range(a // CHUNK_POINTS, (b - 1) // CHUNK_POINTS + 1):
+                if (t, c) not in cached:
+                    if len(cached) >= 2:
+                        cached.clear()
+                    lo, hi = c * CHUNK_POINTS, min(sizes[t], (c + 1) * CHUNK_POINTS)
+                    cached[(t, c)] = (store.read_slice(f"tiles/{t}/xyz", lo, hi),
+                                      store.read_slice(f"tiles/{t}/core", lo, hi))
+                x, k = cached[(t, c)]
+                lo = c * CHUNK_POINTS
+                parts.append((x[max(a, lo) - lo:b - lo], k[max(a, lo) - lo:b - lo]))
+            xyz = np.concatenate([x for x, _ in parts]).astype(np.float64) * scale
+            yield xyz, np.concatenate([k for _, k in parts])
+
+    try:
+        return window_spacing(windows(), k=8, quantile=EPS_QUANTILE)
+    except ConfigError as e:
+        raise ConfigError(f"store {store.url}: no automatic eps ({e}); set coarse.eps and "
+                          "coarse.cluster_epsilon") from None
+
+
 def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     """Run the coarse stage on an ingested store (resumable per tile), then stitch."""
     t0 = time.perf_counter()
@@ -888,22 +959,18 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
             "rerun `hollowtree ingest` first"
         )
     eps, cluster_epsilon = params.eps, params.cluster_epsilon
+    spacing = None
     if eps is None or cluster_epsilon is None:
-        scale = np.asarray(attrs["coords"]["scale"])
-        biggest = max(tiles, key=lambda t: int(done_ingest[str(t)].get("n_points", 0)))
-        # Only the sample is converted (the largest tile can hold 15 M points near a
-        # station): the same rows, the same values as converting the tile first.
-        raw = store.read_unit(f"tiles/{biggest}", ["xyz"])["xyz"]
-        sample = raw[np.random.default_rng(params.seed).permutation(len(raw))[:200_000]].astype(np.float64) * scale
-        del raw
-        spacing_x3 = default_eps(sample) if len(sample) > 10 else 0.3
-        eps = spacing_x3 if eps is None else eps
+        sizes = {t: int(done_ingest[str(t)].get("n_points", 0)) for t in tiles}
+        spacing = scan_spacing(store, sizes, seed=params.seed)
+        auto_eps = EPS_FACTOR * spacing if spacing is not None else 0.3
+        eps = auto_eps if eps is None else eps
         if cluster_epsilon is None:
-            cluster_epsilon = max(0.15, 2.0 * spacing_x3 / 3.0)
+            cluster_epsilon = max(0.15, 2.0 * auto_eps / 3.0)
     ransac = RansacParams.from_dict({**params.ransac.to_dict(), "cluster_epsilon": float(cluster_epsilon)})
     params = CoarseParams.from_dict({**params.to_dict(), "ransac": ransac.to_dict(),
                                      "cluster_epsilon": float(cluster_epsilon), "eps": float(eps)})
-    cfg = {"params": params.to_dict(), "eps": float(eps)}
+    cfg = {"params": params.to_dict(), "eps": float(eps), "algorithm": COARSE_ALGORITHM}
     h = hashlib.sha256(json.dumps([cfg, attrs["ingest"]["params_hash"]], sort_keys=True).encode()).hexdigest()[:16]
     cfg["params_hash"] = h
     stages = attrs.get("stages", {})
@@ -931,18 +998,20 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     if big:
         runner(coarse_tile, [(url, t, cfg, n_blocks[t]) for t in big], "coarse: joins")
     previous = stages.get(STAGE, {})
+    t_stitch = time.perf_counter()
     if not todo and previous.get("params_hash") == h and "n_tile_segments" in previous:
         n_segments, n_keys = int(previous["n_segments"]), int(previous["n_tile_segments"])  # stitched before
     else:
         n_segments, n_keys = _stitch(store, tiles, params)
+    t_stitch = time.perf_counter() - t_stitch
     recs = store.records(STAGE)
     store.update_attrs({"stages": {**store.attrs.get("stages", {}), STAGE: {
-        "params_hash": h, "units": len(tiles), "done": len(tiles), "eps": float(eps),
+        "params_hash": h, "units": len(tiles), "done": len(tiles), "eps": float(eps), "spacing": spacing,
         "params": params.to_dict(), "n_segments": n_segments, "n_tile_segments": n_keys}}})
     return CoarseReport(
         store=url, n_tiles=len(tiles), tiles_run=len(todo), tiles_skipped=len(tiles) - len(todo),
         n_tile_segments=n_keys, n_segments=n_segments,
         n_unsegmented=sum(int(recs[str(t)]["n_unsegmented"]) for t in tiles),
         n_no_normal=sum(int(recs[str(t)]["n_no_normal"]) for t in tiles),
-        seconds=time.perf_counter() - t0,
+        seconds=time.perf_counter() - t0, eps=float(eps), stitch_seconds=t_stitch,
     )

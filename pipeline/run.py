@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.coarse import COARSE_ALGORITHM
 from pipeline.tree_stage import TREE_ALGORITHM
 from pipeline.workflow import Workflow
 from tiling.classes import CLASS_NAMES
@@ -44,7 +45,7 @@ def _stage_params(wf: Workflow) -> dict[str, dict[str, Any]]:
     """Per stage, the workflow parameters that decide its result."""
     return {
         "ingest": {"inputs": [str(p) for p in wf.input.paths()], **wf.ingest.model_dump(mode="json")},
-        "coarse": wf.coarse.model_dump(mode="json"),
+        "coarse": {**wf.coarse.model_dump(mode="json"), "algorithm": COARSE_ALGORITHM},
         # the algorithm's version too: a rerun after a change of the tree's code redoes it
         "tree": {**wf.tree.model_dump(mode="json"), "algorithm": TREE_ALGORITHM},
         "labels": {},
@@ -172,7 +173,8 @@ def run_workflow(
             say(report.lines[-1])
             crep = run_coarse(url, coarse_params, runner=runner)
             report.lines.append(f"coarse: {crep.n_segments:,} segments; tiles {crep.tiles_run} run, "
-                                f"{crep.tiles_skipped} skipped")
+                                f"{crep.tiles_skipped} skipped; DBSCAN eps {crep.eps:.3f} m; "
+                                f"{crep.seconds:.1f} s (stitch {crep.stitch_seconds:.1f} s)")
             say(report.lines[-1])
             use_tree = wf.tree.enabled
             if use_tree:

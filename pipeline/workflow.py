@@ -100,12 +100,12 @@ class CoarseSection(_Section):
     k: Annotated[int, Field(ge=3)] = Field(16, description="neighbours of the PCA normals")
     epsilon: PosFloat = Field(0.03, description="RANSAC distance, metres")
     alpha: Annotated[float, Field(gt=0, lt=90)] = Field(20.0, description="RANSAC normal angle, degrees")
-    cluster_epsilon: PosFloat | None = Field(None, description="RANSAC bitmap cell, metres; null = max(0.15, 2 x spacing)")
+    cluster_epsilon: PosFloat | None = Field(None, description="RANSAC bitmap cell, metres; null = max(0.15, 2/3 x the automatic eps)")
     min_support: PosInt = Field(1000, description="smallest primitive, points")
     probability: Annotated[float, Field(gt=0, lt=1)] = Field(0.01, description="accepted chance of missing a primitive")
     shapes: list[Literal["plane", "sphere", "cylinder", "cone", "torus"]] = Field(
         ["plane", "sphere", "cylinder", "cone"], description="primitive types to look for")
-    eps: PosFloat | None = Field(None, description="DBSCAN radius, metres; null = 3 x point spacing")
+    eps: PosFloat | None = Field(None, description="DBSCAN radius, metres; null = 9 x the scan's 25 % 8-NN spacing")
     min_samples: PosInt = Field(10, description="DBSCAN core threshold")
     free_segments: bool = Field(True, description="cluster the points no primitive explains into free segments too")
     free_min_points: PosInt = Field(200, description="smallest free segment, points")
@@ -123,7 +123,7 @@ class CoarseSection(_Section):
                          "group for the tree; 0 = every segment alone")
     group_min_contacts: PosInt = Field(3, description="contacts two segments need to be grouped")
     group_max_plane: PosFloat = Field(
-        8.0, description="planes wider than this in x-y, metres (ground, roofs, facades), are never grouped")
+        6.0, description="planes wider than this in x-y, metres (ground, roofs, facades), are never grouped")
 
 
 #: The smallest sample a large element group's tree is built on (tree.max_group_points).

@@ -22,6 +22,7 @@ exactly, border points included (see :func:`dbscan_labels`).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 
 import numpy as np
 import numpy.typing as npt
@@ -31,7 +32,7 @@ from primitives._validation import as_xyz as _as_xyz
 from primitives.stitch import UnionFind
 from tiling.errors import ConfigError
 
-__all__ = ["dbscan_labels", "dbscan_segments", "default_eps", "sparse_points"]
+__all__ = ["dbscan_labels", "dbscan_segments", "default_eps", "sparse_points", "window_spacing"]
 
 # Point pairs tested at once (bounds the temporary arrays: about 100 bytes per pair).
 _PAIR_BUDGET = 1 << 19
@@ -50,6 +51,7 @@ _PARAMETER_CONSTRAINTS: dict[str, tuple[str, float, bool]] = {
     "min_samples": ("int", 1, True),
     "k": ("int", 1, True),
     "factor": ("float", 0.0, False),
+    "quantile": ("float", 0.0, False),
 }
 
 
@@ -482,6 +484,72 @@ def _label_border(
         best = cand.min(axis=1)
         has = best != big
         labels[q[has]] = best[has]
+
+
+def window_spacing(windows: Iterable[tuple[npt.ArrayLike, npt.ArrayLike]], *, k: int = 8,
+                   quantile: float = 0.25) -> float:
+    """A quantile of the local point spacing, measured on compact windows of a scan.
+
+    Each window is a spatially compact piece of the scan (a run of Morton-sorted rows of
+    a tile) with a mask of the rows to measure; a measured row's spacing is the distance
+    to its ``k``-th nearest other point of its window. All measured rows of all windows
+    are pooled and the ``quantile`` of their spacings is returned.
+
+    Neighbours come from the full window, not from a random sample of the scan, so the
+    value is the scan's own spacing and does not grow with a tile's point count. A low
+    quantile follows the densest, well-covered surfaces: on a terrestrial scan whose
+    spacings are bimodal (near and far surfaces) it stays with the near mode, where the
+    median can jump from one mode to the other (docs/method.md, "The DBSCAN eps").
+
+    Parameters
+    ----------
+    windows : iterable of (xyz, mask)
+        ``xyz`` of shape (n, 3) and a bool ``mask`` of shape (n,) (the rows measured; the
+        others, a tile's buffer, serve as neighbours only). Windows of ``k`` points or
+        fewer are skipped.
+    k : int, default=8
+    quantile : float in (0, 1], default=0.25
+
+    Returns
+    -------
+    spacing : float
+
+    Raises
+    ------
+    ConfigError
+        If a parameter breaks its rule, a window's arrays do not match, no window holds a
+        measured row with ``k`` neighbours, or the spacing is 0 (duplicate points).
+
+    Examples
+    --------
+    >>> line = np.c_[np.arange(20) * 0.5, np.zeros(20), np.zeros(20)]
+    >>> window_spacing([(line, np.ones(20, bool))], k=3, quantile=0.5)
+    1.0
+    """
+    func = "window_spacing"
+    _check_params(func, k=k, quantile=quantile)
+    if quantile > 1:
+        raise ConfigError(f"The 'quantile' parameter of {func} must be a float in the range (0.0, 1.0]. "
+                          f"Got {quantile!r} instead.")
+    k = int(k)
+    found = []
+    for xyz, mask in windows:
+        pts = _as_xyz(xyz, func)
+        m = np.asarray(mask, dtype=bool).reshape(-1)
+        if len(m) != len(pts):
+            raise ConfigError(f"The 'windows' parameter of {func} must pair each window with a mask of one "
+                              f"entry per point ({len(pts)}). Got {len(m)} instead.")
+        if len(pts) <= k or not m.any():
+            continue
+        found.append(cKDTree(pts, balanced_tree=False).query(pts[m], k=[k + 1], workers=-1)[0][:, 0])
+    if not found:
+        raise ConfigError(f"The 'windows' parameter of {func} must hold a measured point with {k} neighbours. "
+                          "Got none instead.")
+    spacing = float(np.quantile(np.concatenate(found), quantile))
+    if not spacing > 0:
+        raise ConfigError(f"The 'windows' parameter of {func} must have distinct neighbours: the spacing "
+                          f"quantile {quantile} is 0. Set eps explicitly instead.")
+    return spacing
 
 
 def sparse_points(xyz: npt.ArrayLike, mask: npt.ArrayLike, spacing: float, factor: float, *, k: int = 8

@@ -117,16 +117,64 @@ def test_rerun_is_resumed(tiled20, capsys):
     assert "0 run" in capsys.readouterr().out
 
 
-def test_tiny_tile_does_not_crash(tmp_path):
-    pts = np.zeros((50, 3)) + [500000.0, 3500000.0, 200.0]
-    pts[:, 0] += np.linspace(0, 1, 50)  # collinear
+def _true_spacing_quantile(store: Path, q: float) -> float:
+    """The q-quantile of the 8-NN spacing of every core point, neighbours from its whole tile."""
+    from scipy.spatial import cKDTree
+
+    s = RunStore.open(store)
+    scale = np.asarray(s.attrs["coords"]["scale"])
+    found = []
+    for t in s.records("ingest"):
+        d = s.read_unit(f"tiles/{t}", ["xyz", "core"])
+        xyz = d["xyz"].astype(np.float64) * scale
+        found.append(cKDTree(xyz).query(xyz[d["core"]], k=9)[0][:, 8])
+    return float(np.quantile(np.concatenate(found), q))
+
+
+def test_automatic_eps_follows_the_scan_spacing_not_the_tiles(scan, tiled20, tmp_path):
+    """The automatic eps is EPS_FACTOR x the 25 % spacing quantile measured on windows of
+    the scan; it matches the spacing of all points and does not move with the tile size."""
+    from pipeline.coarse import EPS_FACTOR, EPS_QUANTILE, scan_spacing
+
+    store = tiled20[1]
+    s = RunStore.open(store)
+    sizes = {int(t): int(r["n_points"]) for t, r in s.records("ingest").items()}
+    assert len(sizes) > 1
+    measured = scan_spacing(s, sizes, seed=0)
+    assert measured == pytest.approx(_true_spacing_quantile(store, EPS_QUANTILE), rel=0.1)
+    one = tmp_path / "one"
+    with task_runner("sync", progress=False) as run:
+        ingest([str(scan)], str(one), IngestParams(tile_size=500.0, buffer=2.0), runner=run)
+        run_coarse(str(one), CoarseParams(), runner=run)
+    stage = RunStore.open(one).attrs["stages"]["coarse"]
+    assert stage["eps"] == pytest.approx(EPS_FACTOR * stage["spacing"])
+    assert stage["params"]["cluster_epsilon"] == pytest.approx(max(0.15, 2.0 * stage["eps"] / 3.0))
+    assert stage["spacing"] == pytest.approx(measured, rel=0.1)
+
+
+def _tiny_las(path: Path, pts: np.ndarray) -> Path:
     header = laspy.LasHeader(point_format=6, version="1.4")
     header.scales, header.offsets = [0.001] * 3, [500000.0, 3500000.0, 0.0]
     las = laspy.LasData(header)
     las.x, las.y, las.z = pts.T
-    las.write(tmp_path / "line.las")
+    las.write(path)
+    return path
+
+
+def test_no_automatic_eps_on_duplicate_points(tmp_path):
+    scan = _tiny_las(tmp_path / "dup.las", np.zeros((40, 3)) + [500000.0, 3500000.0, 200.0])
     with task_runner("sync", progress=False) as run:
-        ingest([str(tmp_path / "line.las")], str(tmp_path / "s"), IngestParams(tile_size=10.0), runner=run)
+        ingest([str(scan)], str(tmp_path / "s"), IngestParams(tile_size=10.0), runner=run)
+        with pytest.raises(ConfigError, match=r"no automatic eps .*set coarse.eps"):
+            run_coarse(str(tmp_path / "s"), CoarseParams(), runner=run)
+
+
+def test_tiny_tile_does_not_crash(tmp_path):
+    pts = np.zeros((50, 3)) + [500000.0, 3500000.0, 200.0]
+    pts[:, 0] += np.linspace(0, 1, 50)  # collinear
+    scan = _tiny_las(tmp_path / "line.las", pts)
+    with task_runner("sync", progress=False) as run:
+        ingest([str(scan)], str(tmp_path / "s"), IngestParams(tile_size=10.0), runner=run)
         rep = run_coarse(str(tmp_path / "s"), PARAMS, runner=run)
     assert rep.n_segments == 0
     assert rep.n_unsegmented == 50

@@ -9,7 +9,13 @@ from sklearn.datasets import make_blobs
 from sklearn.metrics import adjusted_rand_score
 
 import primitives.dbscan as dbscan_module
-from primitives.dbscan import dbscan_labels, dbscan_segments, default_eps, sparse_points
+from primitives.dbscan import (
+    dbscan_labels,
+    dbscan_segments,
+    default_eps,
+    sparse_points,
+    window_spacing,
+)
 from tiling.errors import ConfigError
 
 
@@ -222,6 +228,59 @@ def test_default_eps_errors() -> None:
         default_eps(np.zeros((20, 3)))
     with pytest.raises(ConfigError, match=r"'factor' parameter of default_eps"):
         default_eps(np.eye(3), factor=0)
+
+
+# -- window_spacing ------------------------------------------------------------------------
+
+
+def _grid(n: int, h: float, x0: float = 0.0) -> np.ndarray:
+    g = np.arange(n) * h
+    x, y = np.meshgrid(g, g)
+    return np.c_[x.ravel() + x0, y.ravel(), np.zeros(x.size)]
+
+
+def test_window_spacing_of_a_grid() -> None:
+    xyz = _grid(30, 0.1)
+    # interior points: 4 neighbours at h and 4 at h * sqrt(2), so the 8th is h * sqrt(2)
+    assert window_spacing([(xyz, np.ones(len(xyz), bool))], k=8, quantile=0.5) == pytest.approx(0.1 * np.sqrt(2))
+    # the mask picks the measured rows; the others still serve as neighbours
+    edge = (xyz[:, 0] == 0) & (xyz[:, 1] > 0.5) & (xyz[:, 1] < 2.0)
+    assert window_spacing([(xyz, edge)], k=5, quantile=0.5) == pytest.approx(0.1 * np.sqrt(2))
+
+
+def test_window_spacing_low_quantile_keeps_the_dense_mode() -> None:
+    """Two surfaces, one dense and one 5x sparser: the median follows whichever holds more
+    points, the 25 % quantile stays with the dense one until the dense one is a quarter."""
+    sparse = _grid(40, 0.25, x0=100.0)  # 1 600 points
+    on = np.ones
+    for n in (45, 30, 28):  # the dense surface holds 56 %, 36 %, 33 % of the points
+        dense = _grid(n, 0.05)
+        windows = [(dense, on(len(dense), bool)), (sparse, on(len(sparse), bool))]
+        assert window_spacing(windows, quantile=0.25) == pytest.approx(0.05 * np.sqrt(2)), n
+        median = window_spacing(windows, quantile=0.5)
+        assert median == pytest.approx(0.05 * np.sqrt(2) if n == 45 else 0.25 * np.sqrt(2)), n
+
+
+def test_window_spacing_pools_windows_and_skips_small_ones() -> None:
+    a, b = _grid(20, 0.1), _grid(20, 0.1, x0=50.0)
+    both = window_spacing([(a, np.ones(len(a), bool)), (b, np.ones(len(b), bool)),
+                           (a[:5], np.ones(5, bool))], quantile=0.5)
+    assert both == pytest.approx(window_spacing([(a, np.ones(len(a), bool))], quantile=0.5))
+
+
+def test_window_spacing_errors() -> None:
+    xyz = _grid(10, 0.1)
+    ones = np.ones(len(xyz), bool)
+    with pytest.raises(ConfigError, match=r"'quantile' parameter of window_spacing .*\(0.0, 1.0\]"):
+        window_spacing([(xyz, ones)], quantile=1.5)
+    with pytest.raises(ConfigError, match=r"'quantile' parameter of window_spacing"):
+        window_spacing([(xyz, ones)], quantile=0)
+    with pytest.raises(ConfigError, match="a mask of one entry per point"):
+        window_spacing([(xyz, ones[:5])])
+    with pytest.raises(ConfigError, match="Got none instead"):
+        window_spacing([(xyz[:8], ones[:8]), (xyz, ~ones)])
+    with pytest.raises(ConfigError, match="Set eps explicitly"):
+        window_spacing([(np.zeros((20, 3)), np.ones(20, bool))])
 
 
 # -- dbscan_segments -----------------------------------------------------------------------

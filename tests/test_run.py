@@ -5,6 +5,7 @@ labels identical to the plain local run of the same workflow."""
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -16,6 +17,7 @@ import laspy
 import numpy as np
 import pytest
 
+from pipeline.coarse import COARSE_ALGORITHM
 from pipeline.export import LAS_CLASSIFICATION
 from pipeline.labels import LABEL_DTYPES
 from tiling.classes import ClassId
@@ -119,6 +121,22 @@ def test_changed_parameter_redoes_only_downstream(reference, scan, tmp_path):
     assert "redoing tree, labels" in proc.stdout
     assert "tiles 0 run" in proc.stdout.split("coarse:")[1].splitlines()[0]  # coarse skipped
     _same(_labels(store), reference["labels"])
+
+
+def test_store_of_an_older_coarse_algorithm_is_redone(reference, scan, tmp_path):
+    """A store whose workflow records an older coarse code (another eps rule) redoes its
+    coarse stage and everything after it, not "nothing to do"."""
+    store = tmp_path / "old.zarr"
+    shutil.copytree(reference["store"], store)
+    s = RunStore.open(str(store), mode="a")
+    wf_attrs = s.attrs["workflow"]
+    s.update_attrs({"workflow": {**wf_attrs, "coarse": {**wf_attrs["coarse"], "algorithm": "coarse-v1"}}})
+    proc = _cli("run", str(_workflow(tmp_path, scan, str(store))), "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    assert "redoing coarse, tree, labels" in proc.stdout
+    assert f"coarse.algorithm: 'coarse-v1' -> '{COARSE_ALGORITHM}'" in proc.stdout
+    assert RunStore.open(str(store)).attrs["workflow"]["coarse"]["algorithm"] == COARSE_ALGORITHM
+    _same(_labels(str(store)), reference["labels"])
 
 
 def test_second_run_on_a_store_in_use_is_refused(reference):
