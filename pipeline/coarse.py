@@ -33,7 +33,7 @@ import pyarrow.parquet as pq
 
 from primitives.blocks import block_context, split_blocks
 from primitives.dbscan import dbscan_segments, sparse_points, window_spacing
-from primitives.group import segment_contacts
+from primitives.group import segment_contacts, set_in_plane, stacked_pairs
 from primitives.normals import estimate_normals
 from primitives.ransac import RansacParams, efficient_ransac
 from primitives.stitch import UnionFind
@@ -116,7 +116,20 @@ class CoarseParams:
         Contacts (voxel representatives within ``group_gap``) two segments need.
     group_max_plane : float
         A plane whose horizontal extent (bounding-box diagonal in x-y) exceeds this many
-        metres (ground, roofs, facades) is never grouped: elements stand on it or in it.
+        metres (ground, roofs, facades) is never grouped with its neighbours, except as below.
+    group_set_in : float
+        A segment set in a large wall (it touches a near-vertical large plane, and its
+        bounding box lies within this many metres of the plane and inside the plane's box
+        grown by as much): the jambs and intrados of an arcade's arches in the arcade's
+        face. Such a segment joins that wall (of several, the one it has most contacts
+        with) and none of its other neighbours, so the tree cuts the face into bays with
+        their intrados, and two walls never join through it; 0 = never (coarse-v2).
+    group_stack : float
+        Element groups stacked one on another (the upper one starts at most this many
+        metres above the top of the lower one and their footprints overlap by 70 % of the
+        smaller one; :func:`primitives.group.stacked_pairs`) are one group: a minaret's
+        stages, whose joints its balconies hide from every station. Groups holding a large
+        plane are never stacked. 0 = never (coarse-v2).
     """
 
     k: int = 16
@@ -136,6 +149,8 @@ class CoarseParams:
     group_gap: float = 0.6
     group_min_contacts: int = 3
     group_max_plane: float = 6.0
+    group_set_in: float = 1.5
+    group_stack: float = 1.0
 
     def __post_init__(self) -> None:
         if not (isinstance(self.sparse_factor, (int, float)) and math.isfinite(self.sparse_factor)
@@ -153,6 +168,14 @@ class CoarseParams:
                 and self.group_max_plane > 0):
             raise ConfigError(f"The 'group_max_plane' parameter of coarse must be a float in the range (0.0, inf). "
                               f"Got {self.group_max_plane!r} instead.")
+        if not (isinstance(self.group_set_in, (int, float)) and math.isfinite(self.group_set_in)
+                and self.group_set_in >= 0):
+            raise ConfigError(f"The 'group_set_in' parameter of coarse must be a float in the range [0.0, inf). "
+                              f"Got {self.group_set_in!r} instead.")
+        if not (isinstance(self.group_stack, (int, float)) and math.isfinite(self.group_stack)
+                and self.group_stack >= 0):
+            raise ConfigError(f"The 'group_stack' parameter of coarse must be a float in the range [0.0, inf). "
+                              f"Got {self.group_stack!r} instead.")
         if self.block_margin is not None and not (math.isfinite(self.block_margin) and self.block_margin > 0):
             raise ConfigError(f"The 'block_margin' parameter of coarse must be a float in the range (0.0, inf) "
                               f"or None. Got {self.block_margin!r} instead.")
@@ -652,24 +675,29 @@ def _element_groups(store: RunStore, tiles: Sequence[int], keys: list[tuple[int,
                     key_rows: dict[int, list[tuple[int, int]]], info: dict[tuple[int, int], dict[str, Any]],
                     roots: np.ndarray, params: CoarseParams) -> np.ndarray:
     """Group root (a key row) of every key row: stitched segments joined over the tiles'
-    contacts (``coarse/contacts/<tile>.parquet``) unless one of the two is a large plane."""
+    contacts (``coarse/contacts/<tile>.parquet``) unless one of the two is a large plane
+    or set in a large wall; a segment set in a wall joins it (``CoarseParams.group_set_in``)."""
     n = len(keys)
-    # Per stitched segment (root): the primitive of its largest member and its x-y extent.
+    # Per stitched segment (root): the primitive of its largest member and its bounding box.
     big_n: dict[int, int] = {}
     kind: dict[int, str] = {}
+    plane: dict[int, Any] = {}
     box: dict[int, list[float]] = {}
     for i, r in enumerate(roots.tolist()):
         row = info[keys[i]]
         if row["n_points"] > big_n.get(r, -1):
-            big_n[r], kind[r] = row["n_points"], row["kind"]
-        b = box.setdefault(r, [np.inf, np.inf, -np.inf, -np.inf])
-        b[0], b[1] = min(b[0], row["xmin"]), min(b[1], row["ymin"])
-        b[2], b[3] = max(b[2], row["xmax"]), max(b[3], row["ymax"])
+            big_n[r], kind[r], plane[r] = row["n_points"], row["kind"], row["params"]
+        b = box.setdefault(r, [np.inf, np.inf, np.inf, -np.inf, -np.inf, -np.inf])
+        b[0], b[1], b[2] = min(b[0], row["xmin"]), min(b[1], row["ymin"]), min(b[2], row["zmin"])
+        b[3], b[4], b[5] = max(b[3], row["xmax"]), max(b[4], row["ymax"]), max(b[5], row["zmax"])
     large = np.zeros(n, dtype=bool)
     for r, b in box.items():
-        large[r] = kind[r] == "plane" and math.hypot(b[2] - b[0], b[3] - b[1]) > params.group_max_plane
+        large[r] = kind[r] == "plane" and math.hypot(b[3] - b[0], b[4] - b[1]) > params.group_max_plane
     uf = UnionFind(n)
     uf.union_pairs(np.arange(n, dtype=np.int64), roots.astype(np.int64))
+    pairs_a: list[np.ndarray] = []
+    pairs_b: list[np.ndarray] = []
+    pairs_n: list[np.ndarray] = []
     for t in tiles:
         rel = f"coarse/contacts/{t}.parquet"
         try:
@@ -686,11 +714,89 @@ def _element_groups(store: RunStore, tiles: Sequence[int], keys: list[tuple[int,
             lut[s_] = i
         ka, kb = lut[a], lut[b]
         ok = (ka >= 0) & (kb >= 0)
-        ra, rb = roots[ka[ok]], roots[kb[ok]]
-        join = ~large[ra] & ~large[rb]
-        if join.any():
-            uf.union_pairs(ra[join], rb[join])
+        pairs_a.append(roots[ka[ok]])
+        pairs_b.append(roots[kb[ok]])
+        pairs_n.append(np.asarray(c.column("n").to_numpy(), dtype=np.int64)[ok])
+    if not pairs_a:
+        return uf.find(np.arange(n))
+    ra, rb, cnt = np.concatenate(pairs_a), np.concatenate(pairs_b), np.concatenate(pairs_n)
+    wall_of: dict[int, int] = {}
+    if params.group_set_in > 0:
+        wall_of = _set_in_walls(ra, rb, cnt, large, plane, box, np.asarray(store.attrs["coords"]["offset"], np.float64),
+                                params.group_set_in)
+    set_in = np.zeros(n, dtype=bool)
+    set_in[list(wall_of)] = True
+    join = ~large[ra] & ~large[rb] & ~set_in[ra] & ~set_in[rb]
+    if join.any():
+        uf.union_pairs(ra[join], rb[join])
+    if wall_of:
+        uf.union_pairs(np.asarray(list(wall_of), dtype=np.int64), np.asarray(list(wall_of.values()), dtype=np.int64))
+    if params.group_stack > 0:
+        _join_stacked(uf, large, box, params.group_stack)
     return uf.find(np.arange(n))
+
+
+def _join_stacked(uf: UnionFind, large: np.ndarray, box: dict[int, list[float]], gap: float) -> None:
+    """Join the element groups stacked one on another (``CoarseParams.group_stack``,
+    :func:`primitives.group.stacked_pairs`); groups holding a large plane stay apart."""
+    roots = np.asarray(sorted(box), dtype=np.int64)
+    if len(roots) < 2:
+        return
+    g = uf.find(roots)
+    gbox: dict[int, np.ndarray] = {}
+    has_large: set[int] = set()
+    for r, gr in zip(roots.tolist(), g.tolist(), strict=True):
+        b = np.asarray(box[r], dtype=np.float64)
+        cur = gbox.get(gr)
+        gbox[gr] = b if cur is None else np.r_[np.minimum(cur[:3], b[:3]), np.maximum(cur[3:], b[3:])]
+        if large[r]:
+            has_large.add(gr)
+    groups = [gr for gr in sorted(gbox) if gr not in has_large]
+    if len(groups) < 2:
+        return
+    lo, up = stacked_pairs(np.vstack([gbox[gr] for gr in groups]), gap)
+    if len(lo):
+        ids = np.asarray(groups, dtype=np.int64)
+        uf.union_pairs(ids[lo], ids[up])
+
+
+#: A large plane takes the segments set in it only when it is a wall: the z component of
+#: its unit normal at most this (about 17 degrees from vertical).
+SET_IN_MAX_NZ = 0.3
+
+
+def _set_in_walls(ra: np.ndarray, rb: np.ndarray, cnt: np.ndarray, large: np.ndarray, plane: dict[int, Any],
+                  box: dict[int, list[float]], offset: np.ndarray, tol: float) -> dict[int, int]:
+    """The wall each stitched segment is set in (``CoarseParams.group_set_in``): a
+    segment that touches a large near-vertical plane and lies within ``tol`` of it and
+    inside its box (:func:`primitives.group.set_in_plane`); of several, the one with most
+    contacts. Such a segment joins that wall and none of its other neighbours, so two
+    walls never join through it."""
+    one = large[ra] != large[rb]
+    small = np.where(large[ra[one]], rb[one], ra[one])
+    wall = np.where(large[ra[one]], ra[one], rb[one])
+    count: dict[tuple[int, int], int] = {}
+    for s_, w, k in zip(small.tolist(), wall.tolist(), cnt[one].tolist(), strict=True):
+        count[(s_, w)] = count.get((s_, w), 0) + k
+    by_wall: dict[int, list[int]] = {}
+    for s_, w in count:
+        by_wall.setdefault(w, []).append(s_)
+    shift = np.r_[offset, offset]
+    best: dict[int, tuple[int, int]] = {}
+    for w, smalls in sorted(by_wall.items()):
+        fit = json.loads(plane[w]) if isinstance(plane[w], str) else plane[w]
+        if len(fit) < 4:
+            continue
+        normal = np.asarray(fit[:3], dtype=np.float64)
+        if abs(normal[2]) > SET_IN_MAX_NZ * float(np.linalg.norm(normal)):
+            continue
+        smalls = sorted(smalls)
+        boxes = np.asarray([box[s_] for s_ in smalls], dtype=np.float64) - shift
+        inside = set_in_plane(boxes, normal, float(fit[3]), np.asarray(box[w], dtype=np.float64) - shift, tol)
+        for s_, ok in zip(smalls, inside.tolist(), strict=True):
+            if ok and count[(s_, w)] > best.get(s_, (-1, -1))[0]:
+                best[s_] = (count[(s_, w)], w)
+    return {s_: w for s_, (_, w) in sorted(best.items())}
 
 
 def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tuple[int, int]:
@@ -884,8 +990,9 @@ def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tupl
 EPS_QUANTILE = 0.25
 EPS_FACTOR = 9.0
 # The version of the stage's code where it changes a result (recorded with a run's
-# workflow, so a rerun after such a change redoes the stage). coarse-v2: the eps rule above.
-COARSE_ALGORITHM = "coarse-v2"
+# workflow, so a rerun after such a change redoes the stage). coarse-v2: the eps rule above;
+# coarse-v3: segments set in a wall join it, stacked groups join (group_set_in, group_stack).
+COARSE_ALGORITHM = "coarse-v3"
 SPACING_WINDOWS = 1024
 WINDOW_ROWS = 1024
 

@@ -228,6 +228,11 @@ def evaluate_store(
     group_of, n_groups = primitive_groups(store)
     n_seg = len(group_of) - 1
     clf = Classifier.get((attrs.get("workflow", {}).get("tree") or {}).get("weights"))
+    pillar_max_height = (attrs.get("workflow", {}).get("tree") or {}).get("pillar_max_height")
+    if pillar_max_height is not None:  # the baselines get the tree stage's size rule too
+        from tree.tall import TallPillars
+
+        clf = TallPillars(clf, pillar_max_height)
     say(f"evaluate: {name}: classifying {n_seg:,} coarse segments and {n_groups:,} RANSAC primitives with HollowNet")
     roof_min_height = (attrs.get("workflow", {}).get("tree") or {}).get("roof_min_height")
     ground = None

@@ -143,7 +143,7 @@ def run_workflow(
         cluster_epsilon=cp.cluster_epsilon, eps=cp.eps, min_samples=cp.min_samples, seed=cp.seed,
         free_segments=cp.free_segments, free_min_points=cp.free_min_points, block_points=cp.block_points,
         block_margin=cp.block_margin, sparse_factor=cp.sparse_factor, group_gap=cp.group_gap, group_min_contacts=cp.group_min_contacts,
-        group_max_plane=cp.group_max_plane,
+        group_max_plane=cp.group_max_plane, group_set_in=cp.group_set_in, group_stack=cp.group_stack,
     )
     made = make_synthetic_input(wf, progress=progress)
     if made is not None:

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import time
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -37,6 +38,7 @@ from pipeline.coarse import _read_table, _write_table
 from tiling.classes import PLANAR_CLASSES
 from tiling.errors import ConfigError, PipelineError
 from tiling.store import RunStore
+from tree.tall import TallPillars
 
 __all__ = ["TreeStageParams", "tree_batch", "run_tree", "TreeReport", "plan_batches", "group_starts"]
 
@@ -45,7 +47,7 @@ STAGE = "tree"
 DECISIONS = ("split-model", "energy")
 #: Version of the tree's algorithm (tree/): part of the stage's parameters hash and of the
 #: workflow parameters a run records, so a store made by an older version is redone.
-TREE_ALGORITHM = "tree-v3"
+TREE_ALGORITHM = "tree-v4"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -77,6 +79,9 @@ class TreeStageParams:
         of it) builds its tree on a seeded random sample of about this many points, and
         each of its points takes the labels of its nearest sampled point, so a task's
         memory follows this bound rather than the scan; 0 = never sample.
+    pillar_max_height : float or None
+        A part HollowNet calls pillar that is taller than this many metres is a minaret
+        (``tree/tall.py``: HollowNet cannot see size); None keeps HollowNet's class.
     """
 
     max_depth: int = 3
@@ -87,6 +92,7 @@ class TreeStageParams:
     seed: int = 0
     roof_min_height: float | None = 1.5
     max_group_points: int = 1_000_000
+    pillar_max_height: float | None = 10.0
 
     def __post_init__(self) -> None:
         if not (isinstance(self.max_depth, int) and self.max_depth >= 0):
@@ -100,6 +106,11 @@ class TreeStageParams:
                 or not (self.max_group_points == 0 or self.max_group_points >= 1000):
             raise ConfigError(f"The 'max_group_points' parameter of tree must be 0 or an int >= 1000. "
                               f"Got {self.max_group_points!r} instead.")
+        if self.pillar_max_height is not None and not (
+                isinstance(self.pillar_max_height, (int, float)) and math.isfinite(self.pillar_max_height)
+                and self.pillar_max_height > 0):
+            raise ConfigError(f"The 'pillar_max_height' parameter of tree must be a float in the range (0.0, inf) "
+                              f"or None. Got {self.pillar_max_height!r} instead.")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -108,7 +119,7 @@ class TreeStageParams:
     def from_workflow(cls, section: Any) -> TreeStageParams:
         return cls(max_depth=section.max_depth, decision=section.decision, threshold=section.threshold,
                    batch_points=section.batch_points, weights=section.weights, seed=section.seed, roof_min_height=section.roof_min_height,
-                   max_group_points=section.max_group_points)
+                   max_group_points=section.max_group_points, pillar_max_height=section.pillar_max_height)
 
 
 def plan_batches(offsets: np.ndarray, batch_points: int) -> list[tuple[int, int]]:
@@ -260,6 +271,8 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
     lo, hi = int(offsets[segs[0]]), int(offsets[segs[1]])
     n = hi - lo
     clf = Classifier.get(params.weights, num_threads=_worker_threads())
+    if params.pillar_max_height is not None:
+        clf = TallPillars(clf, params.pillar_max_height)
     bounds = list(range(segs[0], segs[1] + 1)) if starts is None else [*starts, segs[1]]
 
     def ground_level(s: int, s_end: int) -> float | None:

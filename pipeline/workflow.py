@@ -123,7 +123,14 @@ class CoarseSection(_Section):
                          "group for the tree; 0 = every segment alone")
     group_min_contacts: PosInt = Field(3, description="contacts two segments need to be grouped")
     group_max_plane: PosFloat = Field(
-        6.0, description="planes wider than this in x-y, metres (ground, roofs, facades), are never grouped")
+        6.0, description="planes wider than this in x-y, metres (ground, roofs, facades), are not grouped with "
+                         "their neighbours (but see group_set_in)")
+    group_set_in: Annotated[float, Field(ge=0)] = Field(
+        1.5, description="a segment that touches a large wall and lies within this many metres of its plane "
+                         "(an arch's jambs and intrados in an arcade's face) joins that wall; 0 = never")
+    group_stack: Annotated[float, Field(ge=0)] = Field(
+        1.0, description="groups stacked one on another (the upper starts at most this many metres above the "
+                         "lower's top, footprints overlapping by 70 %: a minaret's stages) are one group; 0 = never")
 
 
 #: The smallest sample a large element group's tree is built on (tree.max_group_points).
@@ -145,6 +152,9 @@ class TreeSection(_Section):
         1.5, description="a part classed ground or roof is roof when its median height above the local ground is at least this (m); null = HollowNet's class as it is")
     max_group_points: Annotated[int, Field(ge=0)] = Field(
         1_000_000, description="an element group with more points builds its tree on a seeded sample of this many (0 or at least 1000); its points take their nearest sampled point's labels (bounded memory); 0 = never sample")
+
+    pillar_max_height: Annotated[float, Field(gt=0)] | None = Field(
+        10.0, description="a part HollowNet calls pillar that is taller than this (m) is a minaret (HollowNet cannot see size; its training pillars are 2.5-8 m, its minarets 12-40 m); null = HollowNet's class as it is")
 
     @field_validator("max_group_points")
     @classmethod

@@ -18,7 +18,7 @@ from scipy.spatial import cKDTree
 from primitives._validation import as_xyz
 from tiling.errors import ConfigError
 
-__all__ = ["segment_contacts"]
+__all__ = ["box_plane_distance", "segment_contacts", "set_in_plane", "stacked_pairs"]
 
 
 def _voxel_representatives(xyz: npt.NDArray[np.float64], segment: npt.NDArray[np.int64], size: float
@@ -94,3 +94,126 @@ def segment_contacts(
     keep = count >= min_contacts
     code, count = code[keep], count[keep]
     return code // n_seg, code % n_seg, count.astype(np.int64)
+
+
+def box_plane_distance(boxes: npt.ArrayLike, normal: npt.ArrayLike, d: float) -> npt.NDArray[np.float64]:
+    """Largest distance of each axis-aligned box to the plane ``normal . x + d = 0``.
+
+    The distance is linear over a box, so its largest value is at a corner:
+    ``|n . c + d| + |n| . h`` for the box's centre ``c`` and half-extents ``h``.
+
+    Parameters
+    ----------
+    boxes : array-like of shape (m, 6)
+        ``xmin, ymin, zmin, xmax, ymax, zmax`` per box.
+    normal : array-like of shape (3,)
+        The plane's normal (normalised here).
+    d : float
+        The plane's offset, in the boxes' frame.
+
+    Examples
+    --------
+    >>> box_plane_distance([[0, 0, 0, 1, 1, 1], [2, 0, 0, 3, 1, 1]], [1, 0, 0], -1.0).tolist()
+    [1.0, 2.0]
+    """
+    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 6)
+    n = np.asarray(normal, dtype=np.float64).reshape(3)
+    norm = float(np.linalg.norm(n))
+    if not (np.isfinite(norm) and norm > 0):
+        raise ConfigError(f"The 'normal' parameter of box_plane_distance must be a non-zero vector. "
+                          f"Got {n.tolist()} instead.")
+    n = n / norm
+    c = 0.5 * (b[:, :3] + b[:, 3:])
+    h = 0.5 * (b[:, 3:] - b[:, :3])
+    return np.abs(c @ n + d / norm) + h @ np.abs(n)
+
+
+def set_in_plane(boxes: npt.ArrayLike, normal: npt.ArrayLike, d: float, plane_box: npt.ArrayLike,
+                 tol: float) -> npt.NDArray[np.bool_]:
+    """Whether each box is set in a plane: within ``tol`` of it and inside its box grown by ``tol``.
+
+    The pieces of an arch set in a facade (its jambs and intrados) lie within the wall's
+    thickness of the facade's plane and inside the facade; a minaret or a dome beside it
+    does not (docs/method.md, "Element groups").
+
+    Examples
+    --------
+    >>> wall = [0, 0, 0, 60, 0.05, 7.5]  # a facade in the plane y = 0
+    >>> jamb, minaret = [10, 0, 0, 11, 1.0, 3.5], [-5, -2, 0, -1, 2, 33]
+    >>> set_in_plane([jamb, minaret], [0, 1, 0], 0.0, wall, 1.5).tolist()
+    [True, False]
+    """
+    if not (np.isfinite(tol) and tol > 0):
+        raise ConfigError(f"The 'tol' parameter of set_in_plane must be a float in the range (0.0, inf). "
+                          f"Got {tol!r} instead.")
+    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 6)
+    pb = np.asarray(plane_box, dtype=np.float64).reshape(6)
+    inside = np.all(b[:, :3] >= pb[:3] - tol, axis=1) & np.all(b[:, 3:] <= pb[3:] + tol, axis=1)
+    return inside & (box_plane_distance(b, normal, d) <= tol)
+
+
+def stacked_pairs(boxes: npt.ArrayLike, gap: float, *, overlap: float = 0.7, area_ratio: float = 3.0
+                  ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Pairs of boxes stacked one on the other: the upper one starts at most ``gap`` above
+    (or 0.3 x ``gap`` below) the top of the lower one, their x-y footprints overlap by at
+    least ``overlap`` of the smaller footprint, and the larger footprint is at most
+    ``area_ratio`` times the smaller.
+
+    A minaret's balcony overhangs the shaft above it and hides the joint from every
+    station, so its stages come out as separate groups about a metre apart, one on the
+    other; two elements side by side do not overlap in plan, and a small element over a
+    wide piece (a dome over a hall's interior) differs from it in size (docs/method.md,
+    "Element groups").
+
+    Parameters
+    ----------
+    boxes : array-like of shape (m, 6)
+        ``xmin, ymin, zmin, xmax, ymax, zmax`` per box.
+    gap : float
+        Largest vertical gap, metres (> 0).
+    overlap : float
+        Smallest share of the smaller footprint the two footprints share, in (0, 1].
+    area_ratio : float
+        Largest ratio of the two footprints' areas (>= 1).
+
+    Returns
+    -------
+    lower, upper : ndarrays of int64
+        Row of the lower and of the upper box of every stacked pair.
+
+    Examples
+    --------
+    >>> stage1, stage2 = [0, 0, 0, 4, 4, 10], [0.5, 0.5, 10.2, 3.5, 3.5, 16]
+    >>> beside = [5, 0, 10.2, 9, 4, 16]
+    >>> lo, up = stacked_pairs([stage1, stage2, beside], 1.0)
+    >>> lo.tolist(), up.tolist()
+    ([0], [1])
+    """
+    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 6)
+    if not (np.isfinite(gap) and gap > 0):
+        raise ConfigError(f"The 'gap' parameter of stacked_pairs must be a float in the range (0.0, inf). "
+                          f"Got {gap!r} instead.")
+    if not (0 < overlap <= 1):
+        raise ConfigError(f"The 'overlap' parameter of stacked_pairs must be a float in the range (0.0, 1.0]. "
+                          f"Got {overlap!r} instead.")
+    if not area_ratio >= 1:
+        raise ConfigError(f"The 'area_ratio' parameter of stacked_pairs must be a float in the range [1.0, inf). "
+                          f"Got {area_ratio!r} instead.")
+    area = np.maximum(b[:, 3] - b[:, 0], 0) * np.maximum(b[:, 4] - b[:, 1], 0)
+    lower: list[npt.NDArray[np.int64]] = []
+    upper: list[npt.NDArray[np.int64]] = []
+    for i in range(len(b)):  # O(m^2) over groups, one vectorised row at a time
+        dz = b[:, 2] - b[i, 5]
+        cand = np.flatnonzero((dz <= gap) & (dz >= -0.3 * gap) & (b[:, 5] > b[i, 5]))
+        if not len(cand):
+            continue
+        w = np.minimum(b[cand, 3], b[i, 3]) - np.maximum(b[cand, 0], b[i, 0])
+        h = np.minimum(b[cand, 4], b[i, 4]) - np.maximum(b[cand, 1], b[i, 1])
+        inter = np.maximum(w, 0) * np.maximum(h, 0)
+        small, large = np.minimum(area[cand], area[i]), np.maximum(area[cand], area[i])
+        ok = (inter >= overlap * small) & (small > 0) & (large <= area_ratio * small)
+        lower.append(np.full(int(ok.sum()), i, dtype=np.int64))
+        upper.append(cand[ok].astype(np.int64))
+    if not lower:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return np.concatenate(lower), np.concatenate(upper)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import laspy
@@ -224,6 +225,66 @@ def test_large_planes_are_never_grouped(scan, tmp_path):
     assert wide  # the minaret scene's ground is one
     assert all(sizes[grp[i]] == 1 for i in wide)
     assert (labels > 0).any()
+
+
+def _group_table(store: Path) -> dict:
+    t = pq.read_table(store / "coarse" / "segments.parquet").to_pydict()
+    t["wide"] = [k == "plane" and np.hypot(x1 - x0, y1 - y0) > CoarseParams().group_max_plane
+                 for k, x0, x1, y0, y1 in zip(t["kind"], t["xmin"], t["xmax"], t["ymin"], t["ymax"], strict=True)]
+    t["wall"] = [w and abs(json.loads(p)[2]) < 0.3 for w, p in zip(t["wide"], t["params"], strict=True)]
+    return t
+
+
+def _largest_group_share(scan_path: Path, store: Path, labels: np.ndarray, gt_class: int) -> float:
+    """Share of the ground truth's points of one class in their most common group."""
+    las = laspy.read(scan_path)
+    t = pq.read_table(store / "coarse" / "segments.parquet").to_pydict()
+    grp = np.zeros(max(t["segment"]) + 1, dtype=np.int64)
+    grp[t["segment"]] = t["group"]
+    m = (np.asarray(las["gt_class"]) == gt_class) & (labels > 0)
+    return float(np.bincount(grp[labels[m]]).max() / (np.asarray(las["gt_class"]) == gt_class).sum())
+
+
+@pytest.fixture(scope="module")
+def arcade(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("arcade") / "arcade.laz"
+    synth("arcade", out, n_points=80_000, seed=2)
+    return out
+
+
+def test_segments_set_in_a_wall_join_it(arcade, tmp_path):
+    """An arch's jambs and intrados join the arcade's face (group_set_in), and nothing joins
+    two wide planes or the ground."""
+    off = _segment(arcade, tmp_path / "off", 500.0, CoarseParams(eps=0.3, group_set_in=0.0, group_stack=0.0))
+    on = _segment(arcade, tmp_path / "on", 500.0, CoarseParams(eps=0.3))
+    t_off, t_on = _group_table(tmp_path / "off"), _group_table(tmp_path / "on")
+    assert any(t_on["wall"])
+    assert not all(t_on["wide"])
+    sizes = np.bincount(np.asarray(t_off["group"]))
+    assert all(sizes[g] == 1 for g, w in zip(t_off["group"], t_off["wide"], strict=True) if w)
+    g_on = np.asarray(t_on["group"])
+    wide = np.asarray(t_on["wide"])
+    assert np.bincount(g_on[wide]).max() == 1  # never two wide planes in one group
+    joined = {g for g, w in zip(g_on, t_on["wall"], strict=True) if w}
+    assert any(k != "plane" for g, k in zip(g_on, t_on["kind"], strict=True) if g in joined)
+    for g, w, wl in zip(g_on, wide, t_on["wall"], strict=True):
+        if w and not wl:  # the ground: alone
+            assert (g_on == g).sum() == 1
+    # the arches' points now share a group with their face
+    share_off = _largest_group_share(arcade, tmp_path / "off", off, 4)
+    share_on = _largest_group_share(arcade, tmp_path / "on", on, 4)
+    assert share_on > share_off + 0.2
+
+
+def test_stacked_stages_are_one_group(scan, tmp_path):
+    """A minaret's stages, whose joints its balconies hide, become one group (group_stack)."""
+    off = _segment(scan, tmp_path / "off", 500.0, CoarseParams(eps=0.3, group_stack=0.0))
+    on = _segment(scan, tmp_path / "on", 500.0, CoarseParams(eps=0.3))
+    share_off = _largest_group_share(scan, tmp_path / "off", off, 6)
+    share_on = _largest_group_share(scan, tmp_path / "on", on, 6)
+    assert share_on > share_off + 0.1
+    assert len(set(_group_table(tmp_path / "on")["group"])) < len(set(_group_table(tmp_path / "off")["group"]))
+    assert adjusted_rand_score(off, on) == 1.0  # the segments themselves are unchanged
 
 
 def test_sparse_pass_segments_a_far_thin_surface():

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from pipeline.coarse import CoarseParams
-from primitives.group import segment_contacts
+from primitives.group import box_plane_distance, segment_contacts, set_in_plane, stacked_pairs
 from tiling.errors import ConfigError
 
 
@@ -49,3 +49,56 @@ def test_group_params_are_validated():
         CoarseParams(group_min_contacts=0)
     with pytest.raises(ConfigError, match="group_max_plane"):
         CoarseParams(group_max_plane=0.0)
+    with pytest.raises(ConfigError, match="group_set_in"):
+        CoarseParams(group_set_in=-1.0)
+    with pytest.raises(ConfigError, match="group_stack"):
+        CoarseParams(group_stack=float("nan"))
+
+
+def test_box_plane_distance_is_the_farthest_corner():
+    rng = np.random.default_rng(1)
+    lo = rng.uniform(-5, 5, (50, 3))
+    boxes = np.c_[lo, lo + rng.uniform(0, 3, (50, 3))]
+    normal, d = rng.normal(size=3), 0.7
+    corners = np.stack([np.c_[boxes[:, 0 + 3 * i], boxes[:, 1 + 3 * j], boxes[:, 2 + 3 * k]]
+                        for i in (0, 1) for j in (0, 1) for k in (0, 1)])  # (8, 50, 3)
+    brute = np.abs(corners @ (normal / np.linalg.norm(normal)) + d / np.linalg.norm(normal)).max(axis=0)
+    np.testing.assert_allclose(box_plane_distance(boxes, normal, d), brute, rtol=1e-12)
+    with pytest.raises(ConfigError, match="normal"):
+        box_plane_distance(boxes, [0, 0, 0], 1.0)
+
+
+def test_set_in_plane_takes_jambs_not_neighbours():
+    wall = [0.0, -0.02, 0.0, 30.0, 0.02, 8.0]  # the face y = 0 of a 1 m thick wall (y > 0)
+    boxes = [
+        [4.0, 0.0, 0.0, 5.0, 1.0, 3.5],     # a jamb and its intrados, inside the wall
+        [4.0, -0.5, 0.0, 5.0, 1.2, 4.0],    # the same, reaching a little out of the face
+        [-3.0, -2.0, 0.0, 1.0, 2.0, 30.0],  # a minaret at the wall's end: too deep and tall
+        [10.0, 1.0, 0.0, 14.0, 5.0, 0.1],   # floor behind the wall: too far from the plane
+        [35.0, 0.0, 0.0, 36.0, 1.0, 3.0],   # in the plane but beyond the wall's end
+    ]
+    assert set_in_plane(boxes, [0, 1, 0], 0.0, wall, 1.5).tolist() == [True, True, False, False, False]
+    assert set_in_plane(boxes, [0, 1, 0], 0.0, wall, 0.5).tolist() == [False, False, False, False, False]
+    with pytest.raises(ConfigError, match="tol"):
+        set_in_plane(boxes, [0, 1, 0], 0.0, wall, 0.0)
+
+
+def test_stacked_pairs_join_stages_not_neighbours():
+    stages = [[0, 0, 0, 4, 4, 10], [0.3, 0.3, 10.4, 3.7, 3.7, 17], [0.6, 0.6, 17.8, 3.4, 3.4, 24]]
+    others = [
+        [6, 0, 10.4, 10, 4, 17],      # beside stage 0, not above it
+        [0, 0, 12.5, 4, 4, 20],       # above stage 0 but 2.5 m up
+        [1, 1, 2, 3, 3, 8],           # inside stage 0 (overlapping in height)
+        [-20, -20, 10.2, 20, 20, 11],  # a wide slab on top: covers stage 0's plan, 100 x its area
+        [0, 0, 10.3, 6, 6, 12],       # a wider stage: 2.25 x stage 0's area
+    ]
+    lo, up = stacked_pairs(stages + others, 1.0)
+    pairs = sorted(zip(lo.tolist(), up.tolist(), strict=True))
+    assert {(0, 1), (1, 2), (0, 7)} <= set(pairs)
+    assert not {(0, 3), (0, 4), (0, 5), (5, 0), (0, 6)} & set(pairs)
+    assert stacked_pairs([stages[0], others[3]], 1.0, area_ratio=200.0)[0].size == 1
+    assert stacked_pairs(stages, 0.2)[0].size == 0  # gaps of 0.4 and 0.8 m
+    with pytest.raises(ConfigError, match="overlap"):
+        stacked_pairs(stages, 1.0, overlap=0.0)
+    with pytest.raises(ConfigError, match="area_ratio"):
+        stacked_pairs(stages, 1.0, area_ratio=0.5)

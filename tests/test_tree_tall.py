@@ -1,0 +1,65 @@
+"""The size rule of tree/tall.py: a pillar taller than the bound is a minaret."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.tree_stage import TreeStageParams
+from tiling.classes import ClassId
+from tiling.errors import ConfigError
+from tree.build import build_tree
+from tree.tall import TallPillars, tall_pillars
+
+P, M, W = int(ClassId.PILLAR), int(ClassId.MINARET), int(ClassId.WALL)
+
+
+class _AlwaysPillar:
+    """A stand-in classifier that calls every part a pillar (score 0.8)."""
+
+    def predict(self, segments):
+        n = len(segments)
+        prob = np.zeros((n, 8))
+        prob[:, P - 1] = 0.8
+        return np.full(n, P), np.full(n, 0.8), prob
+
+
+def test_tall_pillars_change_pillars_only():
+    cls = np.array([P, P, P, M, W], dtype=np.uint8)
+    out = tall_pillars(cls, [3.0, 10.0, 10.5, 30.0, 30.0], 10.0)
+    assert out.tolist() == [P, P, M, M, W]
+    assert cls.tolist() == [P, P, P, M, W]  # the input is not modified
+    with pytest.raises(ValueError, match="height"):
+        tall_pillars(cls, [1.0], 10.0)
+
+
+def test_wrapper_uses_each_parts_height_and_keeps_scores():
+    rng = np.random.default_rng(0)
+    column = rng.uniform(0, 1, (500, 3)) * [0.5, 0.5, 6.0]
+    minaret = rng.uniform(0, 1, (500, 3)) * [3.0, 3.0, 30.0]
+    cls, score, prob = TallPillars(_AlwaysPillar(), 10.0).predict([column, minaret, np.zeros((0, 3))])
+    assert cls.tolist() == [P, M, P]
+    np.testing.assert_array_equal(score, 0.8)
+    assert prob.shape == (3, 8)
+    with pytest.raises(ValueError, match="max_height"):
+        TallPillars(_AlwaysPillar(), 0.0)
+
+
+def test_the_tree_labels_a_tall_pillar_a_minaret():
+    rng = np.random.default_rng(1)
+    t = rng.uniform(0, 2 * np.pi, 4000)
+    z = rng.uniform(0, 25.0, 4000)
+    xyz = np.c_[1.5 * np.cos(t), 1.5 * np.sin(t), z]  # a plain 25 m shaft
+    plain = build_tree(xyz, _AlwaysPillar(), rng=0)
+    sized = build_tree(xyz, TallPillars(_AlwaysPillar(), 10.0), rng=0)
+    assert set(plain.class_id.tolist()) == {P}
+    assert sized.nodes.class_id[0] == M
+    assert (sized.instance > 0).all()
+
+
+def test_tree_params_validate_the_bound():
+    assert TreeStageParams().pillar_max_height == 10.0
+    assert TreeStageParams(pillar_max_height=None).pillar_max_height is None
+    for bad in (0.0, -1.0, float("inf")):
+        with pytest.raises(ConfigError, match="pillar_max_height"):
+            TreeStageParams(pillar_max_height=bad)
