@@ -33,7 +33,7 @@ import pyarrow.parquet as pq
 
 from primitives.blocks import block_context, split_blocks
 from primitives.dbscan import dbscan_segments, sparse_points, window_spacing
-from primitives.group import segment_contacts, set_in_plane, stacked_pairs
+from primitives.group import large_segments, segment_contacts, set_in_plane, stacked_pairs
 from primitives.normals import estimate_normals
 from primitives.ransac import RansacParams, efficient_ransac
 from primitives.stitch import UnionFind
@@ -116,7 +116,9 @@ class CoarseParams:
         Contacts (voxel representatives within ``group_gap``) two segments need.
     group_max_plane : float
         A plane whose horizontal extent (bounding-box diagonal in x-y) exceeds this many
-        metres (ground, roofs, facades) is never grouped with its neighbours, except as below.
+        metres (ground, roofs, facades) is never grouped with its neighbours, except as below;
+        nor is a free segment wider than ``STRIP_FACTOR`` (3) times this (a strip along a
+        facade; :func:`primitives.group.large_segments`).
     group_set_in : float
         A segment set in a large wall (it touches a near-vertical large plane, and its
         bounding box lies within this many metres of the plane and inside the plane's box
@@ -686,13 +688,16 @@ def _element_groups(store: RunStore, tiles: Sequence[int], keys: list[tuple[int,
     for i, r in enumerate(roots.tolist()):
         row = info[keys[i]]
         if row["n_points"] > big_n.get(r, -1):
-            big_n[r], kind[r], plane[r] = row["n_points"], row["kind"], row["params"]
+            big_n[r], kind[r] = row["n_points"], row["kind"]
+            plane[r] = row["params"] if row["kind"] == "plane" else "[]"
         b = box.setdefault(r, [np.inf, np.inf, np.inf, -np.inf, -np.inf, -np.inf])
         b[0], b[1], b[2] = min(b[0], row["xmin"]), min(b[1], row["ymin"]), min(b[2], row["zmin"])
         b[3], b[4], b[5] = max(b[3], row["xmax"]), max(b[4], row["ymax"]), max(b[5], row["zmax"])
     large = np.zeros(n, dtype=bool)
-    for r, b in box.items():
-        large[r] = kind[r] == "plane" and math.hypot(b[3] - b[0], b[4] - b[1]) > params.group_max_plane
+    rs = sorted(box)
+    if rs:
+        large[rs] = large_segments([kind[r] for r in rs], [box[r] for r in rs], params.group_max_plane,
+                                   strip_factor=STRIP_FACTOR)
     uf = UnionFind(n)
     uf.union_pairs(np.arange(n, dtype=np.int64), roots.astype(np.int64))
     pairs_a: list[np.ndarray] = []
@@ -759,6 +764,11 @@ def _join_stacked(uf: UnionFind, large: np.ndarray, box: dict[int, list[float]],
         ids = np.asarray(groups, dtype=np.int64)
         uf.union_pairs(ids[lo], ids[up])
 
+
+#: A free segment (no primitive) is large, and never grouped, above this many times
+#: ``group_max_plane`` in x-y: no element is that wide, but the leftover points along a
+#: facade can be one free strip that touches everything on it.
+STRIP_FACTOR = 3.0
 
 #: A large plane takes the segments set in it only when it is a wall: the z component of
 #: its unit normal at most this (about 17 degrees from vertical).
@@ -991,8 +1001,9 @@ EPS_QUANTILE = 0.25
 EPS_FACTOR = 9.0
 # The version of the stage's code where it changes a result (recorded with a run's
 # workflow, so a rerun after such a change redoes the stage). coarse-v2: the eps rule above;
-# coarse-v3: segments set in a wall join it, stacked groups join (group_set_in, group_stack).
-COARSE_ALGORITHM = "coarse-v3"
+# coarse-v3: segments set in a wall join it, stacked groups join (group_set_in, group_stack);
+# coarse-v4: a free segment wider than STRIP_FACTOR x group_max_plane is large.
+COARSE_ALGORITHM = "coarse-v4"
 SPACING_WINDOWS = 1024
 WINDOW_ROWS = 1024
 

@@ -124,7 +124,7 @@ class CoarseSection(_Section):
     group_min_contacts: PosInt = Field(3, description="contacts two segments need to be grouped")
     group_max_plane: PosFloat = Field(
         6.0, description="planes wider than this in x-y, metres (ground, roofs, facades), are not grouped with "
-                         "their neighbours (but see group_set_in)")
+                         "their neighbours (but see group_set_in), nor free segments wider than 3 x this")
     group_set_in: Annotated[float, Field(ge=0)] = Field(
         1.5, description="a segment that touches a large wall and lies within this many metres of its plane "
                          "(an arch's jambs and intrados in an arcade's face) joins that wall; 0 = never")

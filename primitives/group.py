@@ -11,6 +11,8 @@ planes into one element group, the unit the hierarchical tree then splits
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
@@ -18,7 +20,7 @@ from scipy.spatial import cKDTree
 from primitives._validation import as_xyz
 from tiling.errors import ConfigError
 
-__all__ = ["box_plane_distance", "segment_contacts", "set_in_plane", "stacked_pairs"]
+__all__ = ["box_plane_distance", "large_segments", "segment_contacts", "set_in_plane", "stacked_pairs"]
 
 
 def _voxel_representatives(xyz: npt.NDArray[np.float64], segment: npt.NDArray[np.int64], size: float
@@ -217,3 +219,33 @@ def stacked_pairs(boxes: npt.ArrayLike, gap: float, *, overlap: float = 0.7, are
     if not lower:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     return np.concatenate(lower), np.concatenate(upper)
+
+
+def large_segments(kinds: Sequence[str], boxes: npt.ArrayLike, max_plane: float, *,
+                   strip_factor: float = 3.0) -> npt.NDArray[np.bool_]:
+    """Which segments are too wide to be grouped with their neighbours.
+
+    A plane is large above ``max_plane`` metres of x-y bounding-box diagonal (ground,
+    roofs, facades: elements stand on them or in them); a free segment (no primitive)
+    above ``strip_factor`` times that: no element is so wide, but the points RANSAC
+    leaves along a facade can be one free strip touching everything on it. Cylinders,
+    cones and spheres stay groupable at any size: a curved arcade is one
+    (docs/method.md, "Element groups").
+
+    Examples
+    --------
+    >>> boxes = [[0, 0, 0, 30, 1, 8], [0, 0, 0, 10, 10, 6], [0, 0, 0, 41, 4, 11], [0, 0, 0, 28, 3, 20]]
+    >>> large_segments(["plane", "free", "free", "cylinder"], boxes, 6.0).tolist()
+    [True, False, True, False]
+    """
+    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 6)
+    if len(kinds) != len(b):
+        raise ConfigError(f"The 'kinds' parameter of large_segments must have one entry per box ({len(b)}). "
+                          f"Got {len(kinds)} instead.")
+    if not (np.isfinite(max_plane) and max_plane > 0 and np.isfinite(strip_factor) and strip_factor >= 1):
+        raise ConfigError(f"large_segments needs max_plane > 0 and strip_factor >= 1. "
+                          f"Got {max_plane!r} and {strip_factor!r} instead.")
+    diag = np.hypot(b[:, 3] - b[:, 0], b[:, 4] - b[:, 1])
+    plane = np.asarray([k == "plane" for k in kinds], dtype=bool)
+    free = np.asarray([k == "free" for k in kinds], dtype=bool)
+    return (plane & (diag > max_plane)) | (free & (diag > strip_factor * max_plane))

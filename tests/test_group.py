@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from pipeline.coarse import CoarseParams
-from primitives.group import box_plane_distance, segment_contacts, set_in_plane, stacked_pairs
+from primitives.group import (
+    box_plane_distance,
+    large_segments,
+    segment_contacts,
+    set_in_plane,
+    stacked_pairs,
+)
 from tiling.errors import ConfigError
 
 
@@ -102,3 +108,20 @@ def test_stacked_pairs_join_stages_not_neighbours():
         stacked_pairs(stages, 1.0, overlap=0.0)
     with pytest.raises(ConfigError, match="area_ratio"):
         stacked_pairs(stages, 1.0, area_ratio=0.5)
+
+
+def test_large_segments_planes_and_strips():
+    boxes = [
+        [0, 0, 0, 5, 3, 8],     # a 5.8 m wall piece: not large
+        [0, 0, 0, 30, 1, 8],    # a facade: large
+        [0, 0, 0, 10, 10, 6],   # a dome's free cluster, 14 m across: not large
+        [0, 0, 0, 41, 4, 11],   # a free strip along a facade, 41 m: large
+        [0, 0, 0, 28, 3, 20],   # a curved arcade's cylinder, 28 m: groupable
+    ]
+    kinds = ["plane", "plane", "free", "free", "cylinder"]
+    assert large_segments(kinds, boxes, 6.0).tolist() == [False, True, False, True, False]
+    assert large_segments(kinds, boxes, 6.0, strip_factor=10.0).tolist() == [False, True, False, False, False]
+    with pytest.raises(ConfigError, match="one entry per box"):
+        large_segments(kinds[:2], boxes, 6.0)
+    with pytest.raises(ConfigError, match="strip_factor"):
+        large_segments(kinds, boxes, 6.0, strip_factor=0.5)
