@@ -128,10 +128,11 @@ class CoarseParams:
         their intrados, and two walls never join through it; 0 = never (coarse-v2).
     group_stack : float
         Element groups stacked one on another (the upper one starts at most this many
-        metres above the top of the lower one and their footprints overlap by 70 % of the
-        smaller one; :func:`primitives.group.stacked_pairs`) are one group: a minaret's
-        stages, whose joints its balconies hide from every station. Groups holding a large
-        plane are never stacked. 0 = never (coarse-v2).
+        metres above the top of the lower one, their footprints overlap by 70 % of the
+        smaller one and their areas are within 3x; :func:`primitives.group.stacked_pairs`)
+        are one group: a minaret's stages, whose joints its balconies hide from every
+        station. Groups holding a large segment (plane or free strip) are never stacked.
+        0 = never (coarse-v2).
     """
 
     k: int = 16
@@ -743,7 +744,7 @@ def _element_groups(store: RunStore, tiles: Sequence[int], keys: list[tuple[int,
 
 def _join_stacked(uf: UnionFind, large: np.ndarray, box: dict[int, list[float]], gap: float) -> None:
     """Join the element groups stacked one on another (``CoarseParams.group_stack``,
-    :func:`primitives.group.stacked_pairs`); groups holding a large plane stay apart."""
+    :func:`primitives.group.stacked_pairs`); groups holding a large segment stay apart."""
     roots = np.asarray(sorted(box), dtype=np.int64)
     if len(roots) < 2:
         return
