@@ -23,7 +23,7 @@ import math
 import os
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
@@ -33,7 +33,13 @@ import pyarrow.parquet as pq
 
 from primitives.blocks import block_context, split_blocks
 from primitives.dbscan import dbscan_segments, sparse_points, window_spacing
-from primitives.group import large_segments, segment_contacts, set_in_plane, stacked_pairs
+from primitives.group import (
+    large_segments,
+    segment_contacts,
+    segment_contacts_chunked,
+    set_in_plane,
+    stacked_pairs,
+)
 from primitives.normals import estimate_normals
 from primitives.ransac import RansacParams, efficient_ransac
 from primitives.stitch import UnionFind
@@ -335,31 +341,44 @@ def _block_inputs(xy: np.ndarray, cap: int, margin: float) -> tuple[np.ndarray, 
     return block_of, out
 
 
-def _join_blocks(n: int, block_of: np.ndarray, results: Sequence[dict[str, Any]], params: CoarseParams
+def _join_blocks(n: int, results: Iterable[dict[str, Any]], params: CoarseParams
                  ) -> tuple[np.ndarray, list[dict[str, Any]], int]:
     """Join the blocks' segments over their context points, as tiles are joined over their
     buffers (at least 3 shared points and the same primitive within the tolerances).
-    Returns segment per point of the tile, fits per segment and points without a normal."""
-    n_blocks = len(results)
-    own = np.zeros(n, dtype=np.int64)  # each point's segment within its own block
-    key_base = np.zeros(n_blocks + 1, dtype=np.int64)  # block b's segment s -> key_base[b] + s - 1
+
+    ``results`` are the blocks' results in block order (:func:`_segment_block`), taken one
+    at a time (a store-backed run reads each when it is needed), so memory follows one
+    block and a few bytes per point of the tile. Returns segment per point of the tile
+    (int32), fits per segment and points without a normal.
+    """
+    own_key = np.full(n, -1, dtype=np.int32)  # each point's key: block b's segment s -> base_b + s - 1
     all_fits: list[dict[str, Any]] = []
     shared: list[tuple[np.ndarray, np.ndarray]] = []  # (context key, owner's point index)
+    owned_parts: list[np.ndarray] = []  # points owned per key
+    first_parts: list[np.ndarray] = []  # lowest owned point per key
     n_invalid = 0
-    for b, r in enumerate(results):
-        own[r["own_rows"]] = r["own_seg"]
-        key_base[b + 1] = key_base[b] + len(r["fits"])
-        all_fits.extend(r["fits"])
-        shared.append((key_base[b] + np.asarray(r["other_seg"], dtype=np.int64) - 1,
+    base = 0
+    for r in results:
+        n_fits = len(r["fits"])
+        rows = np.asarray(r["own_rows"], dtype=np.int64)
+        seg = np.asarray(r["own_seg"], dtype=np.int64)
+        ok = seg > 0
+        rows, local = rows[ok], seg[ok] - 1
+        own_key[rows] = base + local
+        owned_parts.append(np.bincount(local, minlength=n_fits))
+        first = np.full(n_fits, n, dtype=np.int64)
+        np.minimum.at(first, local, rows)
+        first_parts.append(first)
+        shared.append((base + np.asarray(r["other_seg"], dtype=np.int64) - 1,
                        np.asarray(r["other_rows"], dtype=np.int64)))
+        all_fits.extend(r["fits"])
         n_invalid += int(r["n_invalid"])
-    n_keys = int(key_base[-1])
-    has = own > 0
-    own_key = np.where(has, key_base[block_of] + own - 1, -1)
+        base += n_fits
+    n_keys = base
     uf = UnionFind(n_keys)
     pairs: dict[tuple[int, int], int] = {}
     for ka, pts in shared:
-        kb = own_key[pts]
+        kb = own_key[pts].astype(np.int64)
         ok = kb >= 0
         lo, hi = np.minimum(ka[ok], kb[ok]), np.maximum(ka[ok], kb[ok])
         u, cnt = np.unique(lo * n_keys + hi, return_counts=True)
@@ -374,15 +393,18 @@ def _join_blocks(n: int, block_of: np.ndarray, results: Sequence[dict[str, Any]]
     # Tile segments 1..S: the roots that own points, in order of their lowest point; the
     # fit of each is that of its member with the most owned points.
     root = uf.find(np.arange(n_keys)) if n_keys else np.zeros(0, np.int64)
-    owned = np.bincount(own_key[has], minlength=n_keys)
+    owned = np.concatenate(owned_parts) if owned_parts else np.zeros(0, np.int64)
     first = np.full(n_keys, n, dtype=np.int64)
-    np.minimum.at(first, root[own_key[has]], np.flatnonzero(has))
+    if n_keys:
+        np.minimum.at(first, root, np.concatenate(first_parts))
     live = np.flatnonzero(first < n)
     live = live[np.argsort(first[live], kind="stable")]
     seg_of_root = np.zeros(n_keys, dtype=np.int64)
     seg_of_root[live] = np.arange(1, len(live) + 1)
-    segment = np.zeros(n, dtype=np.int64)
-    segment[has] = seg_of_root[root[own_key[has]]]
+    seg_of_key = seg_of_root[root].astype(np.int32)
+    segment = np.zeros(n, dtype=np.int32)
+    has = own_key >= 0
+    segment[has] = seg_of_key[own_key[has]]
     best = np.full(n_keys, -1, dtype=np.int64)
     for k in np.argsort(owned, kind="stable").tolist():  # ascending: the largest wins last
         if owned[k]:
@@ -408,9 +430,9 @@ def _segment_tile(xyz: np.ndarray, params: CoarseParams, eps: float, tile: int, 
         rng = np.random.default_rng(np.random.SeedSequence([params.seed, tile]))
         seg, fits, no_normal = _segment_points(xyz, params, eps, rng)
         return seg, fits, int(no_normal.sum()), 1
-    block_of, inputs = _block_inputs(xyz[:, :2], cap, margin)
-    results = [_segment_block(xyz[rows], rows, mine, b, params, eps, tile) for b, (rows, mine) in enumerate(inputs)]
-    segment, fits, n_invalid = _join_blocks(n, block_of, results, params)
+    _, inputs = _block_inputs(xyz[:, :2], cap, margin)
+    results = (_segment_block(xyz[rows], rows, mine, b, params, eps, tile) for b, (rows, mine) in enumerate(inputs))
+    segment, fits, n_invalid = _join_blocks(n, results, params)
     return segment, fits, n_invalid, len(inputs)
 
 
@@ -426,18 +448,16 @@ def _block_results_path(tile: int, b: int) -> tuple[str, str]:
 def plan_blocks(url: str, tile: int, cfg: dict[str, Any]) -> int:
     """Dask task: cut a tile above ``block_points`` into blocks, once. Writes each block's
     input (``coarse/block_input/<tile>/<b>``: the tile rows of its context, which of them
-    it owns and their stored coordinates) and the block of every tile row
-    (``coarse/block_of/<tile>``, for the join), then its record; returns the number of
-    blocks. A block task then reads only its own context, not the whole tile."""
+    it owns and their stored coordinates), then its record; returns the number of blocks.
+    A block task then reads only its own context, not the whole tile."""
     store = RunStore.open(url, mode="a")
     params = CoarseParams.from_dict(cfg["params"])
     raw = store.read_unit(f"tiles/{tile}", ["xyz"])["xyz"]
     scale = np.asarray(store.attrs["coords"]["scale"])
-    block_of, inputs = _block_inputs(raw[:, :2].astype(np.float64) * scale[:2], params.block_points,
-                                     _margin(store, cfg, params))
+    _, inputs = _block_inputs(raw[:, :2].astype(np.float64) * scale[:2], params.block_points,
+                              _margin(store, cfg, params))
     for b, (rows, mine) in enumerate(inputs):
         store.write_unit(f"coarse/block_input/{tile}/{b}", {"rows": rows, "mine": mine, "xyz": raw[rows]})
-    store.write_unit(f"coarse/block_of/{tile}", {"block_of": block_of.astype(np.int32)})
     store.record(PLAN_STAGE, str(tile), {"params_hash": cfg["params_hash"], "n_blocks": len(inputs),
                                          "n_context": int(sum(len(r) for r, _ in inputs))})
     return len(inputs)
@@ -472,8 +492,8 @@ def _coarse_unit(url: str, tile: int, b: int, cfg: dict[str, Any]) -> dict[str, 
     return coarse_tile(url, tile, cfg) if b < 0 else coarse_block(url, tile, b, cfg)
 
 
-def _read_block_results(store: RunStore, tile: int, n_blocks: int) -> list[dict[str, Any]]:
-    out = []
+def _block_results(store: RunStore, tile: int, n_blocks: int) -> Iterator[dict[str, Any]]:
+    """The results of a tile's block tasks, one block at a time (for :func:`_join_blocks`)."""
     recs = store.records(BLOCK_STAGE)
     for b in range(n_blocks):
         arrays, table = _block_results_path(tile, b)
@@ -482,71 +502,112 @@ def _read_block_results(store: RunStore, tile: int, n_blocks: int) -> list[dict[
         r["fits"] = [{"kind": k, "params": p, "rms": float(x)}
                      for k, p, x in zip(t["kind"], t["params"], t["rms"], strict=True)]
         r["n_invalid"] = int(recs[f"{tile}.{b}"]["n_invalid"])
-        out.append(r)
-    return out
+        yield r
+
+
+#: Edge rows (16 bytes each) the stitch keeps of the tiles it matched last (least recently
+#: used dropped first): tiles are visited row by row, so a window of about three rows of
+#: tiles is reused; a bound, not a grow-with-the-scan cache.
+STITCH_CACHE_ROWS = 8_000_000
+#: Tile rows read at a time by a tile's table and contacts (:func:`_tile_summary`) and by
+#: the stitch (:func:`_stitch`): their memory follows this, not the densest tile. A
+#: multiple of the store's chunk, so the stitch writes whole chunks.
+READ_ROWS = 4 * CHUNK_POINTS
+
+
+def _tile_summary(store: RunStore, tile: int, segment: np.ndarray, n_segments: int, scale: np.ndarray,
+                  offset: np.ndarray, params: CoarseParams
+                  ) -> tuple[dict[str, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray] | None]:
+    """Per segment ``1..n_segments`` of a tile: points, core points, lowest core index and
+    world bounding box; and the contacts between its segments (``group_gap > 0``).
+
+    The tile's points are read ``READ_ROWS`` rows at a time, so memory follows that
+    and the segments, not the tile (a dense tile near a station holds millions of points).
+    The bounding box is taken on the stored integers and converted once: the conversion
+    is monotonic, so it equals the box of the converted points.
+    """
+    m = n_segments + 1
+    n_pts = np.zeros(m, dtype=np.int64)
+    n_core = np.zeros(m, dtype=np.int64)
+    min_index = np.full(m, np.iinfo(np.int64).max, dtype=np.int64)
+    lo = np.full((m, 3), np.iinfo(np.int64).max, dtype=np.int64)
+    hi = np.full((m, 3), np.iinfo(np.int64).min, dtype=np.int64)
+    n = len(segment)
+
+    def chunks() -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        for start in range(0, n, READ_ROWS):
+            stop = min(start + READ_ROWS, n)
+            seg = segment[start:stop].astype(np.int64)
+            raw = store.read_slice(f"tiles/{tile}/xyz", start, stop)
+            core = store.read_slice(f"tiles/{tile}/core", start, stop).astype(bool)
+            index = store.read_slice(f"tiles/{tile}/index", start, stop).astype(np.int64)
+            n_pts[:] += np.bincount(seg, minlength=m)
+            n_core[:] += np.bincount(seg[core], minlength=m)
+            np.minimum.at(min_index, seg[core], index[core])
+            for j in range(3):
+                col = raw[:, j].astype(np.int64)
+                np.minimum.at(lo[:, j], seg, col)
+                np.maximum.at(hi[:, j], seg, col)
+            # The same metres as the segmentation's (_tile_points), so the same contacts.
+            yield raw.astype(np.float64) * scale, seg
+
+    contacts = None
+    if params.group_gap > 0:
+        contacts = segment_contacts_chunked(chunks(), params.group_gap, min_contacts=params.group_min_contacts)
+    else:
+        for _ in chunks():
+            pass
+    sid = np.flatnonzero(n_pts[1:] > 0) + 1
+    world_lo = lo[sid].astype(np.float64) * scale + offset
+    world_hi = hi[sid].astype(np.float64) * scale + offset
+    table = {"segment": sid, "n_points": n_pts[sid], "n_core": n_core[sid],
+             "min_index": np.where(n_core[sid] > 0, min_index[sid], -1),
+             "xmin": world_lo[:, 0], "ymin": world_lo[:, 1], "zmin": world_lo[:, 2],
+             "xmax": world_hi[:, 0], "ymax": world_hi[:, 1], "zmax": world_hi[:, 2]}
+    return table, contacts
 
 
 def coarse_tile(url: str, tile: int, cfg: dict[str, Any], n_blocks: int = 0) -> dict[str, int]:
     """Dask task: segment one tile (or, with ``n_blocks``, join the results of its block
-    tasks, :func:`coarse_block`); write its arrays and table, then its record."""
+    tasks, :func:`coarse_block`); write its arrays and table, then its record.
+
+    A join holds a few bytes per point of the tile and one block's results at a time
+    (:func:`_join_blocks`, :func:`_tile_summary`), never the tile's coordinates: a tile
+    above ``block_points`` costs its join no more memory than a block task."""
     store = RunStore.open(url, mode="a")
     params = CoarseParams.from_dict(cfg["params"])
     scale = np.asarray(store.attrs["coords"]["scale"])
     offset = np.asarray(store.attrs["coords"]["offset"])
-    d = _tile_points(store, tile, scale)
-    xyz, n = d["local"], len(d["local"])
+    n = store.array_length(f"tiles/{tile}/index")
     from_tasks = bool(n_blocks)
     if from_tasks:
-        block_of = store.read_unit(f"coarse/block_of/{tile}")["block_of"].astype(np.int64)
-        segment, fits, n_invalid = _join_blocks(n, block_of, _read_block_results(store, tile, n_blocks), params)
+        segment, fits, n_invalid = _join_blocks(n, _block_results(store, tile, n_blocks), params)
     else:
+        xyz = _tile_points(store, tile, scale)["local"]
         segment, fits, n_invalid, n_blocks = _segment_tile(xyz, params, cfg["eps"], tile, _margin(store, cfg, params))
-    has = segment > 0
+        del xyz
+    segment = segment.astype(np.int32, copy=False)
     kinds = np.array([0] + [PRIMITIVE_CODES.get(f["kind"], 0) for f in fits], dtype=np.uint8)  # free: 0
-    primitive = kinds[segment]
-    store.write_unit(f"coarse/tiles/{tile}", {
-        "primitive": primitive,
-        "segment": segment.astype(np.int32),
-    })
+    store.write_unit(f"coarse/tiles/{tile}", {"primitive": kinds[segment], "segment": segment})
     # One row per local segment: its primitive, point counts, lowest core index, bbox.
-    rows: dict[str, list[Any]] = {k: [] for k in (
-        "tile", "segment", "kind", "params", "rms", "n_points", "n_core", "min_index",
-        "xmin", "ymin", "zmin", "xmax", "ymax", "zmax")}
-    if has.any():
-        order = np.argsort(segment, kind="stable")
-        seg_sorted = segment[order]
-        starts = np.flatnonzero(np.r_[True, seg_sorted[1:] != seg_sorted[:-1]])
-        ends = np.r_[starts[1:], len(order)]
-        for a, b in zip(starts, ends, strict=True):
-            sid = int(seg_sorted[a])
-            if sid <= 0:
-                continue
-            rows_idx = order[a:b]
-            fit = fits[sid - 1]
-            core = d["core"][rows_idx]
-            world = xyz[rows_idx] + offset
-            rows["tile"].append(tile)
-            rows["segment"].append(sid)
-            rows["kind"].append(fit["kind"])
-            rows["params"].append(fit["params"])
-            rows["rms"].append(fit["rms"])
-            rows["n_points"].append(int(len(rows_idx)))
-            rows["n_core"].append(int(core.sum()))
-            rows["min_index"].append(int(d["index"][rows_idx][core].min()) if core.any() else -1)
-            for j, key in enumerate(("xmin", "ymin", "zmin")):
-                rows[key].append(float(world[:, j].min()))
-            for j, key in enumerate(("xmax", "ymax", "zmax")):
-                rows[key].append(float(world[:, j].max()))
+    summary, contacts = _tile_summary(store, tile, segment, len(fits), scale, offset, params)
+    sid = summary["segment"]
+    rows: dict[str, Any] = {
+        "tile": np.full(len(sid), tile, dtype=np.int64), "segment": sid,
+        "kind": [fits[i - 1]["kind"] for i in sid.tolist()], "params": [fits[i - 1]["params"] for i in sid.tolist()],
+        "rms": [float(fits[i - 1]["rms"]) for i in sid.tolist()],
+        **{k: summary[k] for k in ("n_points", "n_core", "min_index", "xmin", "ymin", "zmin", "xmax", "ymax", "zmax")},
+    }
     _write_table(store, f"coarse/tables/{tile}.parquet", pa.table(rows, schema=_TABLE_SCHEMA))
     n_contacts = 0
-    if params.group_gap > 0:
-        ca, cb, cn = segment_contacts(xyz, segment, params.group_gap, min_contacts=params.group_min_contacts)
+    if contacts is not None:
+        ca, cb, cn = contacts
         _write_table(store, f"coarse/contacts/{tile}.parquet", pa.table({"a": ca, "b": cb, "n": cn}))
         n_contacts = len(ca)
     info = {
         "params_hash": cfg["params_hash"],
         "n_points": n,
-        "n_segments": int(len(rows["segment"])),
+        "n_segments": int(len(sid)),
         "n_unsegmented": int((segment == 0).sum()),
         "n_no_normal": n_invalid,
         "n_blocks": n_blocks,
@@ -554,7 +615,7 @@ def coarse_tile(url: str, tile: int, cfg: dict[str, Any], n_blocks: int = 0) -> 
     }
     store.record(STAGE, str(tile), info)
     if from_tasks:  # the blocks' inputs and results are in the tile's arrays now
-        for group in ("blocks", "block_input", "block_of"):
+        for group in ("blocks", "block_input", "block_of"):  # block_of: stores of before 2026-11-26
             store.delete(f"coarse/{group}/{tile}")
         fs, root = _fs(store)
         if fs.exists(f"{root}/coarse/block_fits/{tile}"):
@@ -826,6 +887,11 @@ def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tupl
     # one tile's buffer rows and one neighbour's core rows at a time, never the scan.
     present = set(tiles)
     cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    scale = np.asarray(store.attrs["coords"]["scale"], dtype=np.float64)
+    offset = np.asarray(store.attrs["coords"]["offset"], dtype=np.float64)
+    # A core row can be another tile's buffer row only within the buffer of its tile's
+    # edge (a little more: the rows were routed before their coordinates were stored).
+    reach = float(grid.buffer) + 10.0 * float(scale[:2].max())
 
     def keys_of(t: int, seg: np.ndarray) -> np.ndarray:
         rows = key_rows.get(t, [])
@@ -838,28 +904,48 @@ def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tupl
                                 "rerun `hollowtree coarse`")
         return kid
 
+    def pieces(t: int, names: Sequence[str]) -> Iterator[dict[str, np.ndarray]]:
+        """Tile ``t``'s rows ``READ_ROWS`` at a time: ``names`` of tiles/<t> and its segment."""
+        n = store.array_length(f"coarse/tiles/{t}/segment")
+        for start in range(0, n, READ_ROWS):
+            stop = min(start + READ_ROWS, n)
+            d = {k: store.read_slice(f"tiles/{t}/{k}", start, stop) for k in names}
+            d["segment"] = store.read_slice(f"coarse/tiles/{t}/segment", start, stop)
+            d["start"] = np.int64(start)
+            yield d
+
     def core_rows(t: int) -> tuple[np.ndarray, np.ndarray]:
-        """Original index (sorted) and key row of the segmented core rows of tile ``t``."""
-        if t not in cache:
-            if len(cache) >= 9:
-                cache.pop(next(iter(cache)))
-            d = store.read_unit(f"tiles/{t}", ["core", "index"])
-            seg = store.read_unit(f"coarse/tiles/{t}", ["segment"])["segment"]
-            m = d["core"] & (seg > 0)
-            idx = d["index"][m].astype(np.int64)
+        """Original index (sorted) and key row of the segmented core rows of tile ``t``
+        near its edge (the only ones a neighbour's buffer can hold)."""
+        if t in cache:
+            cache[t] = cache.pop(t)  # most recently used last
+        else:
+            x0, y0, x1, y1 = grid.core_bounds(t)
+            idx_parts, key_parts = [], []
+            for d in pieces(t, ("core", "index", "xyz")):
+                xy = d["xyz"][:, :2].astype(np.float64) * scale[:2] + offset[:2]
+                edge = ((xy[:, 0] < x0 + reach) | (xy[:, 0] > x1 - reach)
+                        | (xy[:, 1] < y0 + reach) | (xy[:, 1] > y1 - reach))
+                m = d["core"].astype(bool) & (d["segment"] > 0) & edge
+                idx_parts.append(d["index"][m].astype(np.int64))
+                key_parts.append(keys_of(t, d["segment"][m]))
+            idx, key = np.concatenate(idx_parts), np.concatenate(key_parts)
             order = np.argsort(idx)
-            cache[t] = idx[order], keys_of(t, seg[m])[order]
+            cache[t] = idx[order], key[order]
+            while len(cache) > 1 and sum(len(v[0]) for v in cache.values()) > STITCH_CACHE_ROWS:
+                cache.pop(next(iter(cache)))  # least recently used
         return cache[t]
 
     pair_counts: dict[tuple[int, int], int] = {}
     for t in tiles:
-        d = store.read_unit(f"tiles/{t}", ["core", "index"])
-        seg = store.read_unit(f"coarse/tiles/{t}", ["segment"])["segment"]
-        m = ~d["core"] & (seg > 0)
-        if not m.any():
+        b_parts, k_parts = [], []
+        for d in pieces(t, ("core", "index")):
+            m = ~d["core"].astype(bool) & (d["segment"] > 0)
+            b_parts.append(d["index"][m].astype(np.int64))
+            k_parts.append(keys_of(t, d["segment"][m]))
+        b_idx, b_key = np.concatenate(b_parts), np.concatenate(k_parts)
+        if not len(b_idx):
             continue
-        b_idx = d["index"][m].astype(np.int64)
-        b_key = keys_of(t, seg[m])
         ix, iy = grid.tile_index(t)
         for jy in (iy - 1, iy, iy + 1):
             for jx in (ix - 1, ix, ix + 1):
@@ -882,6 +968,7 @@ def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tupl
                 for c_, n_ in zip(u.tolist(), cnt.tolist(), strict=True):
                     k2 = (c_ // len(keys), c_ % len(keys))
                     pair_counts[k2] = pair_counts.get(k2, 0) + n_
+    cache.clear()
     sel = [(i, j) for (i, j), n in sorted(pair_counts.items())
            if n >= 3 and _same_primitive(info[keys[i]], info[keys[j]], params)]
     if sel:
@@ -917,24 +1004,33 @@ def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tupl
         group_of_segment[1:] = np.cumsum(np.r_[True, gm[1:] != gm[:-1]])
 
     # Per tile: the global id of every core row; counts per global segment for the CSR.
-    def tile_global(t: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        arrays = store.read_unit(f"coarse/tiles/{t}", ["primitive", "segment"])
-        seg = arrays["segment"]
-        core = store.read_unit(f"tiles/{t}", ["core"])["core"]
-        lookup = np.zeros(int(seg.max(initial=0)) + 1, dtype=np.int64)
-        for s_, g in local_to_global.get(t, ()):
-            lookup[s_] = g
-        return np.where(core, lookup[seg], 0).astype(np.int64), arrays
-
-    local_to_global: dict[int, list[tuple[int, int]]] = {}
+    by_tile: dict[int, list[tuple[int, int]]] = {}
     for (tt, s_), g in zip(keys, key_global.tolist(), strict=True):
-        local_to_global.setdefault(tt, []).append((s_, g))
+        by_tile.setdefault(tt, []).append((s_, g))
+    local_to_global: dict[int, np.ndarray] = {}
+    for tt, members_tt in by_tile.items():
+        lookup = np.zeros(max(s_ for s_, _ in members_tt) + 1, dtype=np.int64)
+        for s_, g in members_tt:
+            lookup[s_] = g
+        local_to_global[tt] = lookup
+
+    def tile_global(t: int, d: dict[str, np.ndarray]) -> np.ndarray:
+        seg = d["segment"].astype(np.int64)
+        lookup = local_to_global.get(t, np.zeros(1, dtype=np.int64))
+        top = int(seg.max(initial=0))
+        if top >= len(lookup):  # a segment without a table row: no global id
+            lookup = np.r_[lookup, np.zeros(top + 1 - len(lookup), dtype=np.int64)]
+        return np.where(d["core"].astype(bool), lookup[seg], 0)
+
     counts = np.zeros(n_segments + 1, dtype=np.int64)
     for t in tiles:
-        counts += np.bincount(tile_global(t)[0], minlength=n_segments + 1)
+        for d in pieces(t, ("core",)):
+            counts += np.bincount(tile_global(t, d), minlength=n_segments + 1)
     # The CSR (original index and store xyz of every core point, grouped by global
     # segment) is filled through disk-backed scratch arrays, so the driver never holds
-    # the scan in memory. Each tile also keeps the CSR position of its core rows.
+    # the scan in memory. Each tile also keeps the CSR position of its core rows. Rows
+    # are taken READ_ROWS at a time, in order: within a global segment a tile's rows get
+    # consecutive positions in row order, as a stable sort of the whole tile would give.
     offsets = np.r_[0, np.cumsum(counts[1:])].astype(np.int64)
     total = int(offsets[-1])
     with tempfile.TemporaryFile() as scratch_i, tempfile.TemporaryFile() as scratch_x:
@@ -943,24 +1039,30 @@ def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tupl
         fd_i, fd_x = scratch_i.fileno(), scratch_x.fileno()
         cursor = offsets[:-1].copy()
         for t in tiles:
-            glob, arrays = tile_global(t)
-            d = store.read_unit(f"tiles/{t}", ["index", "xyz"])
-            pos = np.full(len(glob), -1, dtype=np.int64)
-            rows = np.flatnonzero(glob > 0)
-            if len(rows):
-                g = glob[rows]
-                order = np.argsort(g, kind="stable")
-                rows, g = rows[order], g[order]
-                starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
-                ends = np.r_[starts[1:], len(g)]
-                for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
-                    gg = int(g[a]) - 1
-                    span = np.arange(cursor[gg], cursor[gg] + (b - a))
-                    pos[rows[a:b]] = span
-                    _pwrite_all(fd_i, np.ascontiguousarray(d["index"][rows[a:b]], dtype=np.uint64), int(span[0]) * 8)
-                    _pwrite_all(fd_x, np.ascontiguousarray(d["xyz"][rows[a:b]], dtype=np.int32), int(span[0]) * 12)
-                    cursor[gg] += b - a
-            store.write_unit(f"coarse/tiles/{t}", {**arrays, "global": glob.astype(np.uint64), "csr_pos": pos})
+            n_rows = store.array_length(f"coarse/tiles/{t}/segment")
+            store.create_array(f"coarse/tiles/{t}/global", shape=(n_rows,), dtype=np.uint64)
+            store.create_array(f"coarse/tiles/{t}/csr_pos", shape=(n_rows,), dtype=np.int64)
+            for d in pieces(t, ("core", "index", "xyz")):
+                glob = tile_global(t, d)
+                pos = np.full(len(glob), -1, dtype=np.int64)
+                rows = np.flatnonzero(glob > 0)
+                if len(rows):
+                    g = glob[rows]
+                    order = np.argsort(g, kind="stable")
+                    rows, g = rows[order], g[order]
+                    starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
+                    ends = np.r_[starts[1:], len(g)]
+                    for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
+                        gg = int(g[a]) - 1
+                        span = np.arange(cursor[gg], cursor[gg] + (b - a))
+                        pos[rows[a:b]] = span
+                        _pwrite_all(fd_i, np.ascontiguousarray(d["index"][rows[a:b]], dtype=np.uint64),
+                                    int(span[0]) * 8)
+                        _pwrite_all(fd_x, np.ascontiguousarray(d["xyz"][rows[a:b]], dtype=np.int32),
+                                    int(span[0]) * 12)
+                        cursor[gg] += b - a
+                store.write_slice(f"coarse/tiles/{t}/global", int(d["start"]), glob.astype(np.uint64))
+                store.write_slice(f"coarse/tiles/{t}/csr_pos", int(d["start"]), pos)
         store.write_unit("coarse/csr", {"offsets": offsets})
         store.create_array("coarse/csr/indices", shape=(total,), dtype=np.uint64)
         store.create_array("coarse/csr/xyz", shape=(total, 3), dtype=np.int32)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import sys
+import uuid
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
@@ -62,6 +63,37 @@ def tune_process_for_streaming() -> None:
     mallopt(m_trim_threshold, 1 << 30)
 
 
+#: Dask settings of the local cluster's worker processes. Dask's nanny starts each worker
+#: with ``MALLOC_TRIM_THRESHOLD_=65536``: glibc then hands memory back to the kernel after
+#: nearly every large array and the next array's pages fault in zeroed again. A coarse
+#: block task of 2.1 M points took 22.3 s (7.9 s in the kernel) with it and 13.9 s
+#: (1.3 s) with glibc's own adaptive thresholds, peak 1,013 against 1,054 MB
+#: (docs/benchmarks.md). ``None`` unsets it; a value in the environment still wins.
+_LOCAL_WORKER_CONFIG: dict[str, Any] = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
+
+
+def _trim_heap() -> None:
+    """Hand the C heap's free memory back to the kernel (glibc's ``malloc_trim``; a no-op
+    elsewhere)."""
+    import ctypes
+
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+
+
+def _run_and_trim(fn: Callable[..., Any], *args: Any) -> Any:
+    """Run one task, then trim the heap: a worker keeps its freed memory for reuse during a
+    task (no page-fault storm, see ``_LOCAL_WORKER_CONFIG``) but not from one task to the
+    next, so a long-lived worker's footprint is that of its largest task, not the sum of
+    what every stage left in its heap."""
+    try:
+        return fn(*args)
+    finally:
+        _trim_heap()
+
+
 def _bar(total: int, desc: str, progress: bool) -> tqdm:
     return tqdm(total=total, desc=desc, unit="task", disable=not progress or total == 0,
                 leave=False, file=sys.stderr)
@@ -85,7 +117,9 @@ def _client_runner(client: Any, progress: bool) -> Runner:
     def run(fn: Callable[..., Any], args_list: Sequence[tuple[Any, ...]], desc: str) -> list[Any]:
         if not args_list:
             return []
-        futures = [client.submit(fn, *args, pure=False) for args in args_list]
+        name = getattr(fn, "__name__", "task")  # the dashboard shows the stage's function
+        futures = [client.submit(_run_and_trim, fn, *args, key=f"{name}-{uuid.uuid4().hex}")
+                   for args in args_list]
         try:
             with _bar(len(futures), desc, progress) as bar:
                 for fut in as_completed(futures):
@@ -127,7 +161,7 @@ def task_runner(
         # sampling every worker thread every 10 ms there.
         quiet = contextlib.nullcontext() if processes else dask.config.set(
             {"distributed.worker.profile.enabled": False})
-        with quiet, LocalCluster(
+        with quiet, dask.config.set(_LOCAL_WORKER_CONFIG), LocalCluster(
             n_workers=workers, threads_per_worker=1, processes=processes,
             dashboard_address=":0", silence_logs=logging.ERROR,
         ) as cluster, Client(cluster) as client:

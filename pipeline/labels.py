@@ -109,14 +109,30 @@ def _core_labels(store: RunStore, tile: int, start: int, stop: int, cfg: dict[st
 def _write_part(store: RunStore, tile: int, j: int, index: np.ndarray, values: dict[str, np.ndarray],
                 n_points: int) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """Write part ``j`` of a tile sorted by original index; return it and its record entry
-    (its length and, per output range it touches, its rows there)."""
+    (its length and, per output range it touches, its rows there). ``values`` are sorted
+    in place of the caller's (one array at a time: the part is held once, not twice)."""
     order = np.argsort(index)
-    part = {"index": index[order], **{k: values[k][order] for k in LABEL_DTYPES}}
+    part = {"index": index[order]}
+    del index
+    for k in LABEL_DTYPES:
+        part[k] = values.pop(k)[order]
+    del order
     store.write_unit(f"labels/parts/{tile}/{j}", part)
     bounds = np.arange(0, n_points + RANGE_ROWS, RANGE_ROWS)
     cuts = np.searchsorted(part["index"], bounds.astype(np.uint64))
     ranges = {str(r): [int(cuts[r]), int(cuts[r + 1])] for r in range(len(bounds) - 1) if cuts[r + 1] > cuts[r]}
-    return part, {"n": int(len(order)), "ranges": ranges}
+    return part, {"n": int(len(part["index"])), "ranges": ranges}
+
+
+def _kept_labels(store: RunStore, tile: int, n_rows: int, cfg: dict[str, Any]
+                 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Original index and labels of every core row of a tile, read ``PART_ROWS`` rows at a
+    time: only the compact result (26 bytes per point) is held for the whole tile."""
+    got = [_core_labels(store, tile, start, min(start + PART_ROWS, n_rows), cfg)
+           for start in range(0, max(n_rows, 1), PART_ROWS)]
+    index = np.concatenate([g[0] for g in got])
+    values = {k: np.concatenate([g[1].pop(k) for g in got]) for k in LABEL_DTYPES}
+    return index, values
 
 
 def labels_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, Any]:
@@ -125,21 +141,26 @@ def labels_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, Any]:
     Written as parts of at most ``PART_ROWS`` points (``labels/parts/<tile>/<j>``), so the
     task's memory follows that, not the tile. Without voxels the parts are runs of the
     tile's rows; with voxels part 0 holds every kept core point (the voxel grid bounds
-    them) and the next parts the dropped points, ``PART_ROWS`` at a time, each taking its
-    representative's labels from part 0.
+    them; they are labelled ``PART_ROWS`` rows at a time and only their compact labels are
+    held, :func:`_kept_labels`) and the next parts the dropped points, ``PART_ROWS`` at a
+    time, each taking its representative's labels from part 0.
     """
     store = RunStore.open(url, mode="a")
     if store.has(f"labels/parts/{tile}"):  # an interrupted attempt, or another labels run
         store.delete(f"labels/parts/{tile}")
     n_rows = store.array_length(f"tiles/{tile}/index")
     n_dropped = store.array_length(f"tiles/{tile}/voxel_dropped") if store.has(f"tiles/{tile}/voxel_dropped") else 0
-    step = n_rows if n_dropped else PART_ROWS
     parts = []
     kept: dict[str, np.ndarray] = {}
-    for start in range(0, max(n_rows, 1), max(step, 1)):
-        index, values = _core_labels(store, tile, start, min(start + step, n_rows), cfg)
-        kept, info = _write_part(store, tile, len(parts), index, values, cfg["n_points"])
+    if n_dropped:
+        index, values = _kept_labels(store, tile, n_rows, cfg)
+        kept, info = _write_part(store, tile, 0, index, values, cfg["n_points"])
         parts.append(info)
+    else:
+        for start in range(0, max(n_rows, 1), PART_ROWS):
+            index, values = _core_labels(store, tile, start, min(start + PART_ROWS, n_rows), cfg)
+            _, info = _write_part(store, tile, len(parts), index, values, cfg["n_points"])
+            parts.append(info)
     for start in range(0, n_dropped, PART_ROWS):
         stop = min(start + PART_ROWS, n_dropped)
         dropped = store.read_slice(f"tiles/{tile}/voxel_dropped", start, stop)

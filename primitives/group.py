@@ -11,7 +11,7 @@ planes into one element group, the unit the hierarchical tree then splits
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -20,14 +20,14 @@ from scipy.spatial import cKDTree
 from primitives._validation import as_xyz
 from tiling.errors import ConfigError
 
-__all__ = ["box_plane_distance", "large_segments", "segment_contacts", "set_in_plane", "stacked_pairs"]
+__all__ = ["box_plane_distance", "large_segments", "segment_contacts", "segment_contacts_chunked", "set_in_plane",
+           "stacked_pairs"]
 
 
-def _voxel_representatives(xyz: npt.NDArray[np.float64], segment: npt.NDArray[np.int64], size: float
-                           ) -> npt.NDArray[np.int64]:
-    """Row of one point per (voxel of edge ``size``, segment) pair."""
-    v = np.floor(xyz / size).astype(np.int64)
-    v -= v.min(axis=0)
+def _first_per_voxel(v: npt.NDArray[np.int64], segment: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
+    """Row of the first point of each (voxel, segment) pair, ascending; ``v`` are integer
+    voxel coordinates ``(n, 3)``."""
+    v = v - v.min(axis=0)
     dims = v.max(axis=0) + 1
     n_seg = int(segment.max()) + 1
     if float(np.prod(dims.astype(np.float64))) * n_seg < 2.0**62:
@@ -36,6 +36,35 @@ def _voxel_representatives(xyz: npt.NDArray[np.float64], segment: npt.NDArray[np
     else:  # an extent too large for one int64 key: unique rows (slower, same answer)
         _, first = np.unique(np.c_[v, segment], axis=0, return_index=True)
     return np.sort(first)
+
+
+def _voxel_representatives(xyz: npt.NDArray[np.float64], segment: npt.NDArray[np.int64], size: float
+                           ) -> npt.NDArray[np.int64]:
+    """Row of one point (the first) per (voxel of edge ``size``, segment) pair."""
+    return _first_per_voxel(np.floor(xyz / size).astype(np.int64), segment)
+
+
+def _check_gap(gap: float, func: str) -> None:
+    if not (np.isfinite(gap) and gap > 0):
+        raise ConfigError(f"The 'gap' parameter of {func} must be a float in the range (0.0, inf). "
+                          f"Got {gap!r} instead.")
+
+
+def _contacts(q: npt.NDArray[np.float64], s: npt.NDArray[np.int64], gap: float, min_contacts: int
+              ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """The contacts between representatives ``q`` of segments ``s``."""
+    empty = np.zeros(0, dtype=np.int64)
+    pairs = cKDTree(q).query_pairs(gap, output_type="ndarray")
+    if not len(pairs):
+        return empty, empty, empty
+    sa, sb = s[pairs[:, 0]], s[pairs[:, 1]]
+    other = sa != sb
+    lo, hi = np.minimum(sa[other], sb[other]), np.maximum(sa[other], sb[other])
+    n_seg = int(s.max()) + 1
+    code, count = np.unique(lo * n_seg + hi, return_counts=True)
+    keep = count >= min_contacts
+    code, count = code[keep], count[keep]
+    return code // n_seg, code % n_seg, count.astype(np.int64)
 
 
 def segment_contacts(
@@ -75,27 +104,60 @@ def segment_contacts(
     if len(seg) != len(p):
         raise ConfigError(f"The 'segment' parameter of segment_contacts must have one entry per point "
                          f"({len(p)}). Got {len(seg)} instead.")
-    if not (np.isfinite(gap) and gap > 0):
-        raise ConfigError(f"The 'gap' parameter of segment_contacts must be a float in the range (0.0, inf). "
-                         f"Got {gap!r} instead.")
+    _check_gap(gap, "segment_contacts")
     empty = np.zeros(0, dtype=np.int64)
     has = np.flatnonzero(seg > 0)
     if len(np.unique(seg[has])) < 2:
         return empty, empty, empty
     p, seg = p[has], seg[has]
     rep = _voxel_representatives(p, seg, gap / 2.0)
-    q, s = p[rep], seg[rep]
-    pairs = cKDTree(q).query_pairs(gap, output_type="ndarray")
-    if not len(pairs):
+    return _contacts(p[rep], seg[rep], gap, min_contacts)
+
+
+def segment_contacts_chunked(
+    chunks: Iterable[tuple[npt.ArrayLike, npt.ArrayLike]], gap: float, *, min_contacts: int = 3
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """:func:`segment_contacts` of the points of ``chunks`` (``(xyz, segment)`` pairs, in
+    order) taken together, holding one chunk at a time.
+
+    Each chunk is thinned to its first point per (voxel, segment) pair; the first of those
+    over all chunks is the first over all points, so the representatives, their order and
+    the answer are those of :func:`segment_contacts` on the concatenated points. Memory
+    follows one chunk and the representatives (one per voxel of edge ``gap / 2`` and
+    segment), not the number of points.
+
+    Examples
+    --------
+    >>> x = np.c_[np.linspace(0, 1, 11), np.zeros(11), np.zeros(11)]
+    >>> pts, seg = np.r_[x, x + [1.1, 0, 0], x + [5, 0, 0]], np.repeat([1, 2, 3], 11)
+    >>> a, b, n = segment_contacts_chunked([(pts[:15], seg[:15]), (pts[15:], seg[15:])], 0.3, min_contacts=1)
+    >>> a.tolist(), b.tolist()
+    ([1], [2])
+    """
+    _check_gap(gap, "segment_contacts_chunked")
+    size = gap / 2.0
+    vs, ss, ps = [], [], []
+    for xyz, segment in chunks:
+        p = as_xyz(xyz, "segment_contacts_chunked")
+        seg = np.asarray(segment, dtype=np.int64).reshape(-1)
+        if len(seg) != len(p):
+            raise ConfigError(f"The 'segment' parameter of segment_contacts_chunked must have one entry per "
+                              f"point of its chunk ({len(p)}). Got {len(seg)} instead.")
+        has = np.flatnonzero(seg > 0)
+        if not len(has):
+            continue
+        p, seg = p[has], seg[has]
+        v = np.floor(p / size).astype(np.int64)
+        first = _first_per_voxel(v, seg)
+        vs.append(v[first])
+        ss.append(seg[first])
+        ps.append(p[first])
+    empty = np.zeros(0, dtype=np.int64)
+    if not ss or len(np.unique(np.concatenate(ss))) < 2:
         return empty, empty, empty
-    sa, sb = s[pairs[:, 0]], s[pairs[:, 1]]
-    other = sa != sb
-    lo, hi = np.minimum(sa[other], sb[other]), np.maximum(sa[other], sb[other])
-    n_seg = int(seg.max()) + 1
-    code, count = np.unique(lo * n_seg + hi, return_counts=True)
-    keep = count >= min_contacts
-    code, count = code[keep], count[keep]
-    return code // n_seg, code % n_seg, count.astype(np.int64)
+    v, s, q = np.concatenate(vs), np.concatenate(ss), np.concatenate(ps)
+    first = _first_per_voxel(v, s)
+    return _contacts(q[first], s[first], gap, min_contacts)
 
 
 def box_plane_distance(boxes: npt.ArrayLike, normal: npt.ArrayLike, d: float) -> npt.NDArray[np.float64]:

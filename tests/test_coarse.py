@@ -351,6 +351,75 @@ def test_block_tasks_equal_the_in_process_blocks(scan, tmp_path):
             assert not s.has(f"coarse/{group}/{t}")
 
 
+def test_tile_tables_and_contacts_read_a_piece_at_a_time(scan, tmp_path, monkeypatch):
+    """A tile's table and contacts are taken READ_ROWS rows at a time (so a dense tile's
+    join holds no coordinates): they equal those of the whole tile's points at once."""
+    import pipeline.coarse as coarse
+    from primitives.group import segment_contacts
+
+    monkeypatch.setattr(coarse, "READ_ROWS", 997)
+    store_path = tmp_path / "s"
+    params = CoarseParams(eps=0.3, block_points=8_000)
+    _segment(scan, store_path, 500.0, params)
+    s = RunStore.open(store_path)
+    scale, offset = (np.asarray(s.attrs["coords"][k]) for k in ("scale", "offset"))
+    gap = CoarseParams.from_dict(s.attrs["stages"]["coarse"]["params"]).group_gap
+    for t in s.records("coarse"):
+        d = s.read_unit(f"tiles/{t}", ["xyz", "core", "index"])
+        local = d["xyz"].astype(np.float64) * scale
+        seg = s.read_unit(f"coarse/tiles/{t}", ["segment"])["segment"].astype(np.int64)
+        assert len(seg) > 997
+        table = pq.read_table(store_path / "coarse" / "tables" / f"{t}.parquet").to_pydict()
+        sids = np.unique(seg[seg > 0])
+        assert table["segment"] == sids.tolist()
+        for i, sid in enumerate(sids.tolist()):
+            rows = seg == sid
+            world = local[rows] + offset
+            core = d["core"][rows].astype(bool)
+            assert table["n_points"][i] == rows.sum()
+            assert table["n_core"][i] == core.sum()
+            assert table["min_index"][i] == (int(d["index"][rows][core].min()) if core.any() else -1)
+            assert [table[k][i] for k in ("xmin", "ymin", "zmin")] == world.min(axis=0).tolist()
+            assert [table[k][i] for k in ("xmax", "ymax", "zmax")] == world.max(axis=0).tolist()
+        got = pq.read_table(store_path / "coarse" / "contacts" / f"{t}.parquet").to_pydict()
+        a, b, n = segment_contacts(local, seg, gap, min_contacts=params.group_min_contacts)
+        assert (got["a"], got["b"], got["n"]) == (a.tolist(), b.tolist(), n.tolist())
+
+
+def test_stitch_reads_a_piece_at_a_time(scan, tmp_path, monkeypatch):
+    """The stitch reads tiles READ_ROWS rows at a time and matches buffer rows only to core
+    rows near a tile's edge: the global ids, CSR and table equal those of whole tiles."""
+    import pipeline.coarse as coarse
+
+    store_path = tmp_path / "s"
+    _segment(scan, store_path, 20.0)
+    s = RunStore.open(store_path, mode="a")
+    tiles = [int(t) for t in s.attrs["ingest"]["tiles"]]
+    assert len(tiles) > 2
+
+    def outputs() -> dict[str, object]:
+        out: dict[str, object] = {k: s.read_unit("coarse/csr")[k] for k in ("offsets", "indices", "xyz")}
+        for t in tiles:
+            out.update({f"{t}/{k}": v for k, v in s.read_unit(f"coarse/tiles/{t}", ["global", "csr_pos"]).items()})
+        out["table"] = pq.read_table(store_path / "coarse" / "segments.parquet").to_pydict()
+        return out
+
+    params = CoarseParams.from_dict(s.attrs["stages"]["coarse"]["params"])
+    whole = outputs()
+    assert len(whole["indices"]) > 997  # type: ignore[arg-type]
+    monkeypatch.setattr(coarse, "READ_ROWS", 997)
+    coarse._stitch(s, tiles, params)
+    pieces = outputs()
+    assert pieces.keys() == whole.keys()
+    for k, v in whole.items():
+        if k == "table":
+            assert pieces[k].keys() == v.keys()  # type: ignore[union-attr]
+            for c in v:  # type: ignore[union-attr]
+                np.testing.assert_array_equal(pieces[k][c], v[c])  # type: ignore[index]  # NaN == NaN here
+        else:
+            assert np.array_equal(pieces[k], v), k
+
+
 def test_interrupted_block_tasks_resume(scan, tmp_path):
     """A run stopped after some block tasks resumes: planned tiles are not cut again,
     recorded blocks are not run again, and the answer is that of an uninterrupted run."""

@@ -10,6 +10,7 @@ from primitives.group import (
     box_plane_distance,
     large_segments,
     segment_contacts,
+    segment_contacts_chunked,
     set_in_plane,
     stacked_pairs,
 )
@@ -40,6 +41,27 @@ def test_contacts_need_min_contacts():
     seg = np.array([1, 2, 3, 4])
     assert segment_contacts(xyz, seg, 0.3, min_contacts=1)[0].tolist() == [1, 3]
     assert segment_contacts(xyz, seg, 0.3, min_contacts=2)[0].size == 0
+
+
+@pytest.mark.parametrize("cuts", [[], [1], [4000, 4001], [500, 3000, 6000, 8999], list(range(0, 9000, 700))])
+def test_chunked_contacts_equal_the_whole(cuts):
+    """Contacts taken chunk by chunk (a tile's rows, read a piece at a time) are those of
+    all the points at once: the same pairs and the same counts, whatever the cuts."""
+    rng = np.random.default_rng(3)
+    xyz = np.r_[_ring(3000, 1.0, 0.0, rng), _ring(3000, 1.0, 1.1, rng), _ring(3000, 1.05, 0.5, rng)]
+    seg = rng.choice([0, 1, 2, 3, 4], size=len(xyz), p=[0.1, 0.3, 0.3, 0.2, 0.1])
+    order = rng.permutation(len(xyz))  # chunks cut across voxels and segments
+    xyz, seg = xyz[order], seg[order]
+    whole = segment_contacts(xyz, seg, 0.3, min_contacts=1)
+    assert len(whole[0]) >= 3
+    bounds = [0, *cuts, len(xyz)]
+    chunks = [(xyz[a:b], seg[a:b]) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+    got = segment_contacts_chunked(chunks, 0.3, min_contacts=1)
+    for w, g in zip(whole, got, strict=True):
+        assert np.array_equal(w, g)
+    assert segment_contacts_chunked([(xyz, np.zeros(len(xyz), int))], 0.3)[0].size == 0  # nothing segmented
+    with pytest.raises(ConfigError, match="segment"):
+        segment_contacts_chunked([(xyz, seg[:-1])], 0.3)
 
 
 @pytest.mark.parametrize("bad", [0.0, -1.0, float("nan")])
