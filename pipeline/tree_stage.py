@@ -47,7 +47,9 @@ STAGE = "tree"
 DECISIONS = ("split-model", "energy")
 #: Version of the tree's algorithm (tree/): part of the stage's parameters hash and of the
 #: workflow parameters a run records, so a store made by an older version is redone.
-TREE_ALGORITHM = "tree-v4"
+#: tree-v4: a tall pillar is a minaret (tree/tall.py); tree-v5: the split model
+#: (tree/data/split-v1.json) refitted on coarse-v4 element groups.
+TREE_ALGORITHM = "tree-v5"
 
 
 @dataclass(frozen=True, kw_only=True)
