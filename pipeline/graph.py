@@ -24,7 +24,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-__all__ = ["task_runner", "tune_process_for_streaming"]
+__all__ = ["fresh_workers", "task_runner", "tune_process_for_streaming"]
 
 logger = logging.getLogger(__name__)
 
@@ -92,6 +92,33 @@ def _run_and_trim(fn: Callable[..., Any], *args: Any) -> Any:
         return fn(*args)
     finally:
         _trim_heap()
+
+
+def fresh_workers(runner: Runner) -> None:
+    """Replace the worker processes of a runner's local cluster by new ones (a no-op for
+    the in-process runner and for a cluster this command did not start).
+
+    What a stage leaves in a worker it does not hand back: the tree stage imports torch
+    and loads HollowNet, about 0.5 GB that a labels task would otherwise carry on top of
+    its own working set (docs/benchmarks.md, "End to end"). Takes a few seconds.
+    """
+    restart = getattr(runner, "restart_workers", None)
+    if restart is not None:
+        restart()
+
+
+def _restart_quietly(client: Any) -> None:
+    """``client.restart()`` without the nannies' "Restarting worker" warnings (an expected
+    restart, not a failure)."""
+    loggers = [logging.getLogger(n) for n in ("distributed.nanny", "distributed.scheduler", "distributed.core")]
+    levels = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.setLevel(logging.ERROR)
+    try:
+        client.restart(wait_for_workers=True)
+    finally:
+        for lg, level in zip(loggers, levels, strict=True):
+            lg.setLevel(level)
 
 
 def _bar(total: int, desc: str, progress: bool) -> tqdm:
@@ -167,7 +194,10 @@ def task_runner(
         ) as cluster, Client(cluster) as client:
             if progress:
                 print(f"dask dashboard: {client.dashboard_link}", file=sys.stderr)
-            yield _client_runner(client, progress)
+            run = _client_runner(client, progress)
+            if processes:  # our own worker processes: fresh_workers may replace them
+                run.restart_workers = lambda: _restart_quietly(client)  # type: ignore[attr-defined]
+            yield run
         return
     with Client(scheduler, timeout="10s") as client:
         if progress:

@@ -119,7 +119,7 @@ def run_workflow(
 ) -> RunReport:
     """Run every stage of ``wf`` (resuming what the store already records)."""
     from pipeline.coarse import CoarseParams, run_coarse
-    from pipeline.graph import task_runner
+    from pipeline.graph import fresh_workers, task_runner
     from pipeline.labels import run_labels
     from primitives.ransac import RansacParams
     from tiling.ingest import IngestParams, ingest
@@ -183,6 +183,8 @@ def run_workflow(
                 trep = run_tree(url, TreeStageParams.from_workflow(wf.tree), runner=runner)
                 report.lines.append(trep.summary())
                 say(report.lines[-1])
+                if trep.batches_run:  # torch and HollowNet stay in the workers that ran the tree
+                    fresh_workers(runner)
             lrep = run_labels(url, use_tree=use_tree, runner=runner)
             report.lines.append(lrep.summary())
             say(report.lines[-1])

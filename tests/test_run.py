@@ -277,3 +277,19 @@ def test_store_on_s3_moto_server(reference, scan, tmp_path, monkeypatch):
     finally:
         server.kill()
         server.wait()
+
+
+def test_fresh_workers_replaces_only_our_own_worker_processes():
+    """After the tree stage the run replaces its local cluster's workers (torch and
+    HollowNet stay in a worker otherwise); the in-process runner has none to replace."""
+    from pipeline.graph import fresh_workers, task_runner
+
+    with task_runner("sync", progress=False) as run:
+        fresh_workers(run)
+        assert run(os.getpid, [()], "pid") == [os.getpid()]
+    with task_runner(None, workers=1, progress=False) as run:
+        before = run(os.getpid, [()], "pid")
+        fresh_workers(run)
+        after = run(os.getpid, [()], "pid")
+    assert before != after
+    assert os.getpid() not in before + after
