@@ -16,6 +16,7 @@ each task reads and writes its own data in the store.
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import sys
 import uuid
@@ -29,6 +30,19 @@ __all__ = ["fresh_workers", "task_runner", "tune_process_for_streaming"]
 logger = logging.getLogger(__name__)
 
 Runner = Callable[[Callable[..., Any], Sequence[tuple[Any, ...]], str], list[Any]]
+
+
+@functools.lru_cache(maxsize=1)
+def _glibc() -> Any:
+    """glibc, with the allocator calls used here, or None where it is not the C library."""
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        libc.mallopt, libc.malloc_trim  # noqa: B018  (both must exist)
+    except (OSError, AttributeError):
+        return None
+    return libc
 
 
 def tune_process_for_streaming() -> None:
@@ -51,11 +65,10 @@ def tune_process_for_streaming() -> None:
     import gc
 
     gc.freeze()
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-        mallopt = libc.mallopt
-    except (OSError, AttributeError):
+    libc = _glibc()
+    if libc is None:
         return
+    mallopt = libc.mallopt
     m_trim_threshold, m_mmap_threshold, m_arena_max = -1, -3, -8
     mallopt.argtypes = [ctypes.c_int, ctypes.c_int]  # the value is a C int: 1 GiB fits
     mallopt(m_arena_max, 1)
@@ -75,12 +88,9 @@ _LOCAL_WORKER_CONFIG: dict[str, Any] = {"distributed.nanny.pre-spawn-environ.MAL
 def _trim_heap() -> None:
     """Hand the C heap's free memory back to the kernel (glibc's ``malloc_trim``; a no-op
     elsewhere)."""
-    import ctypes
-
-    try:
-        ctypes.CDLL("libc.so.6").malloc_trim(0)
-    except (OSError, AttributeError):
-        pass
+    libc = _glibc()
+    if libc is not None:
+        libc.malloc_trim(0)
 
 
 def _run_and_trim(fn: Callable[..., Any], *args: Any) -> Any:
