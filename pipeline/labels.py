@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.tree_stage import MERGE_MAP
 from tiling.classes import NUM_CLASSES
 from tiling.errors import PipelineError
 from tiling.store import CHUNK_POINTS, RunStore
@@ -65,6 +66,8 @@ def _tree_values(store: RunStore, pos: np.ndarray, tree: dict[str, Any]) -> dict
     if not n or not len(batches):
         return out
     offsets = np.asarray(tree["instance_offsets"], dtype=np.int64)
+    # Instances merged across element groups (tree.merge); a store without the map has none.
+    imap = store.read_slice(MERGE_MAP).astype(np.int64) if store.has(MERGE_MAP) else None
     b_of = np.searchsorted(batches[:, 0], pos, side="right") - 1
     for b in np.unique(b_of).tolist():
         sel = np.flatnonzero(b_of == b)
@@ -80,7 +83,8 @@ def _tree_values(store: RunStore, pos: np.ndarray, tree: dict[str, Any]) -> dict
         out["leaf"][sel] = arrays["leaf"][local]
         out["class"][sel] = arrays["class"][local]
         inst = arrays["instance"][local].astype(np.int64)
-        out["instance"][sel] = np.where(inst > 0, inst + offsets[b], 0).astype(np.uint32)
+        inst = np.where(inst > 0, inst + offsets[b], 0)
+        out["instance"][sel] = (imap[inst] if imap is not None else inst).astype(np.uint32)
         out["score"][sel] = arrays["score"][local]
     return out
 

@@ -48,8 +48,10 @@ DECISIONS = ("split-model", "energy")
 #: Version of the tree's algorithm (tree/): part of the stage's parameters hash and of the
 #: workflow parameters a run records, so a store made by an older version is redone.
 #: tree-v4: a tall pillar is a minaret (tree/tall.py); tree-v5: the split model
-#: (tree/data/split-v1.json) refitted on coarse-v4 element groups.
-TREE_ALGORITHM = "tree-v5"
+#: (tree/data/split-v1.json) refitted on coarse-v4 element groups; tree-v6: a storey cut
+#: at a solid band that reaches the node's top (tree.sequences.occupancy_cut, open_high),
+#: and a tall pillar with a flat footprint stays a pillar (tree.tall.MIN_FOOTPRINT_RATIO).
+TREE_ALGORITHM = "tree-v6"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -160,6 +162,12 @@ _PLANAR = np.array([int(c) for c in PLANAR_CLASSES], dtype=np.uint8)
 _NODE_COLUMNS = ("segment", "node_id", "parent", "depth", "sequence", "e1", "e2", "e3", "e4", "e5", "xi",
                  "class_id", "score", "n_points", "xmin", "ymin", "zmin", "xmax", "ymax", "zmax",
                  "is_leaf", "instance")
+
+
+_BOX = ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax")
+#: The instance map of the merge across element groups (:mod:`tree.merge`): entry ``i``
+#: is the instance that batch-global instance ``i`` belongs to (0 stays 0).
+MERGE_MAP = "tree/merge/instance_map"
 
 
 def group_starts(store: RunStore) -> np.ndarray:
@@ -315,11 +323,12 @@ class TreeReport:
     n_nodes: int
     n_instances: int
     seconds: float
+    n_merged: int = 0
 
     def summary(self) -> str:
         return (f"tree: {self.n_segments:,} segments in {self.n_groups:,} element groups, {self.n_batches} batches ({self.batches_run} run, "
                 f"{self.n_batches - self.batches_run} skipped); {self.n_nodes:,} nodes, "
-                f"{self.n_instances:,} element instances; {self.seconds:.1f} s")
+                f"{self.n_instances:,} instances ({self.n_merged:,} merged across groups); {self.seconds:.1f} s")
 
 
 def _ground_levels(store: RunStore) -> np.ndarray:
@@ -376,11 +385,33 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any) -> TreeReport:
             t = t.set_column(t.schema.get_field_index("instance"), "instance",
                              pa.array(np.where(inst > 0, inst + inst_offsets[b], 0)))
             tables.append(t)
-        if tables:
-            _write_table(store, "tree/nodes.parquet", pa.concat_tables(tables))
+        nodes = pa.concat_tables(tables) if tables else None
+        imap = _merge_map(nodes, int(inst_offsets[-1]))
+        if nodes is not None:
+            inst = np.asarray(nodes.column("instance").to_numpy(), dtype=np.int64)
+            nodes = nodes.set_column(nodes.schema.get_field_index("instance"), "instance",
+                                     pa.array(imap[inst].astype(np.int64)))
+            _write_table(store, "tree/nodes.parquet", nodes)
+        store.write_unit("tree/merge", {"instance_map": imap})
+    n_merged = int(np.count_nonzero(store.read_slice(MERGE_MAP) != np.arange(int(inst_offsets[-1]) + 1))) \
+        if store.has(MERGE_MAP) else 0
     n_nodes = sum(int(i["n_nodes"]) for i in infos)
     store.update_attrs({"stages": {**store.attrs.get("stages", {}), STAGE: {
         "params_hash": h, "units": len(batches), "done": len(batches), "params": params.to_dict(),
         "batches": [i["csr"] for i in infos], "instance_offsets": inst_offsets[:-1].tolist()}}})
     return TreeReport(n_segments=len(offsets) - 1, n_groups=len(starts) - 1, n_batches=len(batches), batches_run=len(todo),
-                      n_nodes=n_nodes, n_instances=int(inst_offsets[-1]), seconds=time.perf_counter() - t0)
+                      n_nodes=n_nodes, n_instances=int(inst_offsets[-1]) - n_merged, n_merged=n_merged,
+                      seconds=time.perf_counter() - t0)
+
+
+def _merge_map(nodes: pa.Table | None, n_instances: int) -> np.ndarray:
+    """The instance map of :func:`tree.merge.merge_instances` over every instance node."""
+    from tree.merge import merge_instances
+
+    if nodes is None or nodes.num_rows == 0:
+        return np.arange(n_instances + 1, dtype=np.uint32)
+    inst = np.asarray(nodes.column("instance").to_numpy(), dtype=np.int64)
+    sel = np.flatnonzero(inst > 0)
+    col = {c: np.asarray(nodes.column(c).to_numpy())[sel] for c in ("class_id", "segment", *_BOX)}
+    return merge_instances(inst[sel], col["class_id"], col["segment"], np.column_stack([col[c] for c in _BOX]),
+                           n_instances)

@@ -134,3 +134,30 @@ def test_labels_in_small_parts_are_the_same(tmp_path, scan, monkeypatch, voxel):
         _, cls = _sample(small_store, n_max=10**9)
         np.testing.assert_array_equal(np.bincount(cls, minlength=9), np.bincount(small["class"], minlength=9))
 
+
+
+def test_instances_merged_across_groups_reach_labels_and_nodes(tmp_path, scan, monkeypatch):
+    """The tree stage's merge map (tree/merge.py) is what labels/instance and
+    tree/nodes.parquet hold: a map that joins every instance into instance 1 leaves one
+    instance wherever there was one; the classes are untouched."""
+    import pyarrow.parquet as pq
+
+    import tree.merge as tm
+    from pipeline.tree_stage import MERGE_MAP
+
+    tree = "{enabled: true, max_depth: 1}"
+    plain_store, plain = _run(tmp_path / "plain", scan, tree=tree)
+    imap = plain_store.read_slice(MERGE_MAP)
+    assert imap[0] == 0
+    np.testing.assert_array_equal(imap, np.arange(len(imap)))  # this small scan: nothing to merge
+    assert len(np.unique(plain["instance"])) > 3
+
+    def merge_all(instance, class_id, group, bbox, n_instances, **kw):
+        return np.minimum(np.arange(n_instances + 1), 1).astype(np.uint32)
+
+    monkeypatch.setattr(tm, "merge_instances", merge_all)
+    store, merged = _run(tmp_path / "all", scan, tree=tree)
+    np.testing.assert_array_equal(merged["class"], plain["class"])
+    np.testing.assert_array_equal(merged["instance"], np.minimum(plain["instance"], 1))
+    nodes = pq.read_table(tmp_path / "all" / "s.zarr" / "tree" / "nodes.parquet").column("instance").to_numpy()
+    assert set(np.unique(nodes).tolist()) <= {0, 1}

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from tree.energy import e1, e2, e3, e4, e5, energy_terms
-from tree.operators import TransportCurve, fit_circle, fit_ngon, h, p, psi, rho, split_at, u, v1, v2
-from tree.sequences import s1, s2, s3
+from tree.operators import TransportCurve, fit_circle, h, p, psi, rho, split_at, u, v1, v2
+from tree.sequences import s1, s2, s3, storeys
 
 
 def _ring(rng, *, center=(0.0, 0.0), radius=1.0, n=500, noise=0.0, arc=(0.0, 2 * math.pi)):
@@ -51,7 +51,8 @@ def test_ngon_ransac_recovers_polygon(n_sides):
     rng = np.random.default_rng(2)
     xy = _polygon(rng, n_sides=n_sides, apothem=2.5, center=(1.0, 1.5), angle=0.3, noise=0.005)
     g = psi(xy, rng=0)
-    assert g and g.n_sides == n_sides
+    assert g
+    assert g.n_sides == n_sides
     assert np.allclose(g.center, (1.0, 1.5), atol=0.02)
     assert g.radius == pytest.approx(2.5, abs=0.02)
     step = 2 * math.pi / n_sides
@@ -82,7 +83,8 @@ def test_psi_on_a_large_footprint_fits_its_sample_and_stays_accurate():
 def test_round_footprint_stays_a_circle():
     rng = np.random.default_rng(3)
     c = psi(_ring(rng, radius=2.0, noise=0.005), rng=0)
-    assert c and c.n_sides == 0
+    assert c
+    assert c.n_sides == 0
 
 
 def test_straight_footprint_has_no_transport_curve():
@@ -155,7 +157,8 @@ def test_rho_puts_a_plateau_cut_in_its_middle():
     rng = np.random.default_rng(9)
     x = np.concatenate([rng.uniform(0, 10, 2000), rng.uniform(4.0, 5.5, 3000), rng.uniform(4.0, 4.1, 300)])
     cuts = rho(v2(x, n_fine=100, sigma=0.5))
-    assert len(cuts) == 1 and cuts[0] == pytest.approx(4.75, abs=0.15)
+    assert len(cuts) == 1
+    assert cuts[0] == pytest.approx(4.75, abs=0.15)
 
 
 def test_flat_signal_has_no_peak():
@@ -177,13 +180,43 @@ def test_sequences_on_toy_shapes():
     t = rng.uniform(0, 2 * np.pi, 20000)
     tower = np.column_stack([r * np.cos(t), r * np.sin(t), z])
     prop = s1(tower, rng=0)
-    assert prop is not None and prop.n_children == 3
+    assert prop is not None
+    assert prop.n_children == 3
     assert np.allclose(prop.cuts, [4.0, 8.0], atol=0.3)
     # A straight wall has no transport curve: S1 and S3 propose nothing.
     wall = np.column_stack([rng.uniform(0, 20, 5000), rng.normal(0, 0.01, 5000), rng.uniform(0, 5, 5000)])
-    assert s1(wall, rng=0) is None and s3(wall, rng=0) is None
+    assert s1(wall, rng=0) is None
+    assert s3(wall, rng=0) is None
     # Too few points: no proposal, no crash.
-    assert s2(wall[:3]) is None and s1(wall[:1], rng=0) is None
+    assert s2(wall[:3]) is None
+    assert s1(wall[:1], rng=0) is None
+
+
+def _facade(solid, *, top: float, step: float = 0.05) -> np.ndarray:
+    """Points on a grid of a vertical facade in the x-z plane where ``solid(t, z)``."""
+    t, z = np.meshgrid(np.arange(0, 20, step), np.arange(0, top, step))
+    t, z = t.ravel(), z.ravel()
+    keep = solid(t, z)
+    return np.column_stack([t[keep], np.zeros(keep.sum()), z[keep]])
+
+
+def test_storeys_cut_a_band_over_arches_that_reaches_the_top():
+    """The band over a row of openings is a storey whether or not something stands above it:
+    the occupancy is read as empty past the node's top (occupancy_cut's open_high)."""
+    def bays(t, z):  # piers 1.4 m wide, openings to 4 m, the band above solid
+        return (z > 4.0) | (np.abs(t % 4.0 - 2.0) > 1.3)
+
+    alone = storeys(_facade(bays, top=7.0))
+    assert alone is not None
+    assert alone.n_children == 2
+    assert alone.cuts[0] == pytest.approx(5.5, abs=0.5)
+    # With a thin roof line standing above the band, the same cut comes out.
+    roofed = storeys(_facade(lambda t, z: bays(t, z) & ((z < 7.0) | (np.abs(t - 10) < 0.2)), top=8.0))
+    assert roofed is not None
+    assert roofed.cuts[0] == pytest.approx(alone.cuts[0], abs=0.5)
+    # A plain wall and a wall with one door have no storeys.
+    assert storeys(_facade(lambda t, z: np.ones_like(t, dtype=bool), top=7.0)) is None
+    assert storeys(_facade(lambda t, z: (z > 2.2) | (np.abs(t - 10) > 0.6), top=7.0)) is None
 
 
 # --------------------------------------------------------------------------- energy
@@ -191,10 +224,13 @@ def test_energy_terms_as_method_md_writes_them():
     assert e1([10, 10, 10]) == 1.0
     assert e1([1, 29]) == pytest.approx(0.0)
     assert e1([5, 10, 15]) == pytest.approx(1 - np.std([5, 10, 15]) / np.std([1, 29]))
-    assert e2(50, 100) == 0.5 and e2(500, 100) == 1.0
-    assert e3(1) == 0.0 and e3(2) == pytest.approx(1 - math.exp(-0.5))
+    assert e2(50, 100) == 0.5
+    assert e2(500, 100) == 1.0
+    assert e3(1) == 0.0
+    assert e3(2) == pytest.approx(1 - math.exp(-0.5))
     W = np.arange(27, dtype=float).reshape(9, 3) / 27
-    assert e4(W, 6, 1) == W[6, 0] and e4(W, 4, 3) == W[4, 2]
+    assert e4(W, 6, 1) == W[6, 0]
+    assert e4(W, 4, 3) == W[4, 2]
     assert e5([0.2, 0.4, 0.9]) == pytest.approx(0.5)
     e = energy_terms([10, 20], n_min=100, prior=W, parent_class=6, sequence=2, scores=[0.5, 1.0])
     assert e.tolist() == pytest.approx([e1([10, 20]), 0.3, e3(2), W[6, 1], 0.75])

@@ -57,6 +57,20 @@ def test_the_tree_labels_a_tall_pillar_a_minaret():
     assert (sized.instance > 0).all()
 
 
+def test_a_tall_flat_strip_stays_a_pillar():
+    """A portal's jamb (a vertical plane 2.4 m wide, 15 m tall) is no minaret; a minaret
+    scanned from one side only (a half shaft) still is."""
+    rng = np.random.default_rng(2)
+    u, z = rng.uniform(0, 2.4, 3000), rng.uniform(0, 15.0, 3000)
+    jamb = np.c_[u * 0.6, u * 0.8, z]
+    t = rng.uniform(0, np.pi, 3000)
+    half = np.c_[1.5 * np.cos(t), 1.5 * np.sin(t), z]
+    cls, _, _ = TallPillars(_AlwaysPillar(), 10.0).predict([jamb, half])
+    assert cls.tolist() == [P, M]
+    with pytest.raises(ValueError, match="ratio"):
+        tall_pillars([P], [20.0], 10.0, ratio=[0.5, 0.5])
+
+
 def test_tree_params_validate_the_bound():
     assert TreeStageParams().pillar_max_height == 10.0
     assert TreeStageParams(pillar_max_height=None).pillar_max_height is None

@@ -37,6 +37,7 @@ __all__ = [
     "fit_ngon",
     "h",
     "p",
+    "peak_bins",
     "psi",
     "rho",
     "split_at",
@@ -710,15 +711,21 @@ def rho(hist: Histogram, *, prominence: float = 0.1) -> FloatArray:
     >>> rho(v2(x, n_fine=16, sigma=0.0)).round(4).tolist()   # fine bin [1, 1.125)
     [1.0625]
     """
+    return _refine(hist, peak_bins(hist, prominence=prominence))
+
+
+def peak_bins(hist: Histogram, *, prominence: float = 0.1) -> IntArray:
+    """The limited bins that are peaks for :func:`rho` (sorted; none for fewer than 3 bins
+    or a flat signal)."""
     vals = hist.values
     if len(vals) < 3:
-        return np.empty(0)
+        return np.empty(0, dtype=np.int64)
     span = float(vals.max() - vals.min())
     if span <= 0:
-        return np.empty(0)
+        return np.empty(0, dtype=np.int64)
     # Relative to the signal's level too, so the wiggles of a flat histogram are no peaks.
     peaks, _ = find_peaks(vals, prominence=prominence * max(span, float(np.abs(vals).max())))
-    return _refine(hist, peaks)
+    return peaks.astype(np.int64)
 
 
 def _refine(hist: Histogram, peaks: IntArray) -> FloatArray:

@@ -30,11 +30,14 @@ import numpy as np
 import numpy.typing as npt
 
 from tree.operators import (
+    Histogram,
     RngLike,
     TransportCurve,
     _groups,
+    _refine,
     h,
     p,
+    peak_bins,
     psi,
     rho,
     u,
@@ -49,6 +52,10 @@ FloatArray = npt.NDArray[np.float64]
 
 #: Sequence ids as stored in the node table (0 = the root, produced by no sequence).
 SEQUENCES: tuple[int, ...] = (1, 2, 3)
+
+#: How far (a share of its height) a solid band reaching the top of a node must stand
+#: above the occupancy below it to be a storey cut (:func:`occupancy_cut`).
+OPEN_HIGH_PROMINENCE = 0.25
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -298,10 +305,24 @@ def storeys(xyz: npt.ArrayLike, *, params: SequenceParams | None = None,
         return None
     pz = u(a, curve) if curve is not None else h(a)
     seq = 3 if curve is not None else 2
-    return _finish(seq, pz[:, 1], occupancy_cut(pz[:, 1], pz[:, 0], params), params, curve)
+    cuts = occupancy_cut(pz[:, 1], pz[:, 0], params, open_high=True)
+    return _finish(seq, pz[:, 1], cuts, params, curve)
 
 
-def occupancy_cut(x: FloatArray, y: FloatArray, params: SequenceParams) -> FloatArray:
+def _open_high(hist: Histogram) -> Histogram:
+    """``hist`` with one empty limited bin (and its fine bins) past its high end, so a
+    plateau that reaches the top of the node is a peak when it stands above the rest."""
+    nf, nb = len(hist.fine_values), len(hist.values)
+    k = max(1, nf // nb)
+    df = float(hist.fine_edges[1] - hist.fine_edges[0])
+    fine_edges = np.r_[hist.fine_edges, hist.fine_edges[-1] + df * np.arange(1, k + 1)]
+    return Histogram(edges=np.r_[hist.edges, fine_edges[-1]], values=np.r_[hist.values, 0.0],
+                     fine_edges=fine_edges, fine_values=np.r_[hist.fine_values, np.zeros(k)],
+                     n_zero_crossings=hist.n_zero_crossings)
+
+
+def occupancy_cut(x: FloatArray, y: FloatArray, params: SequenceParams, *,
+                  open_high: bool = False) -> FloatArray:
     """Cuts along ``x`` at the peaks of the wall's occupancy: how many cells of
     ``params.cell`` x ``params.cell`` in the ``(x, y)`` projection hold a point, per
     position along ``x``.
@@ -312,17 +333,39 @@ def occupancy_cut(x: FloatArray, y: FloatArray, params: SequenceParams) -> Float
     peak and an opening a valley wherever the points are at least a cell apart, and a
     plain wall has no peaks at all. The fine histogram has one bin per cell (16 to
     1024 bins); ``v2`` and ``rho`` do the rest. ``params.cell`` 0 counts points.
+
+    ``open_high`` (the storeys): the signal is also read as empty past the high end of
+    ``x``, so a solid band that reaches it (the wall over a row of arches, up to the
+    node's top, with nothing above) is a peak as it is when something stands above it.
+    Such a top peak counts when it stands at least :data:`OPEN_HIGH_PROMINENCE` of its
+    height above the signal below it (a row of openings, not a door in a plain wall);
+    a plain wall, solid all the way, has none.
     """
     kw = dict(sigma=params.sigma, bins_per_crossing=params.bins_per_crossing)
-    if params.cell <= 0 or len(x) == 0:
-        return rho(v2(x, statistic="count", **kw), prominence=params.prominence)  # type: ignore[arg-type]
+    if len(x) == 0:
+        return np.empty(0)
+    if params.cell <= 0:
+        hist = v2(x, statistic="count", **kw)  # type: ignore[arg-type]
+        return _cuts(hist, params.prominence, open_high)
     x0, y0 = float(x.min()), float(y.min())
     kx = ((x - x0) * (1.0 / params.cell)).astype(np.int64)
     ky = ((y - y0) * (1.0 / params.cell)).astype(np.int64)
     _, first = np.unique(kx * (int(ky.max()) + 1) + ky, return_index=True)
     n_fine = int(np.clip(np.ceil((float(x.max()) - x0) / params.cell), 16, 1024))
     hist = v2(x[first], statistic="count", n_fine=n_fine, **kw)  # type: ignore[arg-type]
-    return rho(hist, prominence=params.prominence)
+    return _cuts(hist, params.prominence, open_high)
+
+
+def _cuts(hist: Histogram, prominence: float, open_high: bool) -> FloatArray:
+    """``rho``'s cuts, plus, with ``open_high``, the top plateau's (see :func:`occupancy_cut`)."""
+    peaks = peak_bins(hist, prominence=prominence)
+    if open_high:
+        padded = _open_high(hist)
+        top = peak_bins(padded, prominence=max(prominence, OPEN_HIGH_PROMINENCE))
+        top = top[top > (peaks.max() if len(peaks) else -1)][-1:]
+        if len(top):
+            return _refine(padded, np.r_[peaks, top])
+    return _refine(hist, peaks)
 
 
 def propose(xyz: npt.ArrayLike, *, params: SequenceParams | None = None,

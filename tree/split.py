@@ -162,8 +162,11 @@ class SplitModel:
         # All trees as one set of arrays (children as global node indices), walked together.
         sizes = [len(t["feature"]) for t in self.trees]
         offsets = np.r_[0, np.cumsum(sizes)].astype(np.int64)
-        cat = (lambda key, dtype: np.concatenate([np.asarray(t[key], dtype=dtype) for t in self.trees])
-               if self.trees else np.zeros(0, dtype=dtype))
+        def cat(key: str, dtype: type) -> np.ndarray:
+            if not self.trees:
+                return np.zeros(0, dtype=dtype)
+            return np.concatenate([np.asarray(t[key], dtype=dtype) for t in self.trees])
+
         shift = np.repeat(offsets[:-1], sizes)
         left, right = cat("left", np.int64), cat("right", np.int64)
         flat = {"feature": cat("feature", np.int64), "threshold": cat("threshold", np.float64),

@@ -1,0 +1,64 @@
+"""tree/merge.py: one element split over two element groups is one instance."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tiling.classes import ClassId
+from tree.merge import merge_instances
+
+A, D = int(ClassId.ARCH), int(ClassId.DOME)
+
+
+def _bay(u0, u1, *, y0=0.0, y1=1.2, z1=8.0):
+    return [u0, y0, 0.0, u1, y1, z1]
+
+
+def test_the_face_of_a_bay_joins_its_bay_and_nothing_else():
+    """Khudabad's arcade: each bay's front face (a plane, flat box, 5.8 m) went to one
+    group, its soffit and back (8 m) to another; neighbouring bays share only a pier."""
+    faces = [_bay(4.8 * k, 4.8 * (k + 1), y0=0.0, y1=0.0, z1=5.8) for k in range(4)]
+    bays = [_bay(4.8 * k, 4.8 * (k + 1)) for k in range(4)]
+    m = merge_instances(np.arange(1, 9), [A] * 8, [1] * 4 + [2] * 4, faces + bays, 8)
+    assert m.tolist() == [0, 1, 2, 3, 4, 1, 2, 3, 4]
+
+
+def test_storeys_neighbours_same_group_and_other_classes_stay_apart():
+    lower, upper = _bay(0, 4, z1=6.0), [0, 0, 6.0, 4, 1.2, 12.0]
+    nxt = _bay(4, 8)
+    boxes = [lower, upper, nxt, _bay(0, 4), _bay(0, 4)]
+    # storeys (groups 1, 2), neighbour (3), a twin in the same group as `lower` (1), a dome (4)
+    m = merge_instances([1, 2, 3, 4, 5], [A, A, A, A, D], [1, 2, 3, 1, 4], boxes, 5)
+    assert m.tolist() == [0, 1, 2, 3, 4, 5]
+
+
+def test_a_bay_inside_a_large_box_of_another_shape_stays_apart():
+    """A minaret's side called arch spans 8 m along the wall; a 3.6 m bay lying in its box
+    shares 3D volume with it but not the wall's length."""
+    m = merge_instances([1, 2], [A, A], [1, 2], [[0, 0, 0, 3.6, 1.0, 5.2], [-1, -2, 0, 6.1, 6.0, 11.9]], 2)
+    assert m.tolist() == [0, 1, 2]
+
+
+def test_chains_take_the_smallest_id_and_ids_out_of_range_fail():
+    boxes = [_bay(0, 4)] * 3
+    m = merge_instances([7, 3, 5], [A] * 3, [1, 2, 3], boxes, 9)
+    assert m.tolist() == [0, 1, 2, 3, 4, 3, 6, 3, 8, 9]
+    with pytest.raises(ValueError, match="1..2"):
+        merge_instances([3], [A], [1], [_bay(0, 4)], 2)
+    with pytest.raises(ValueError, match="one class, group and box"):
+        merge_instances([1, 2], [A], [1, 2], boxes[:2], 2)
+
+
+def test_many_instances_are_compared_in_blocks(monkeypatch):
+    """The pairs are compared _PAIR_BLOCK at a time: the same map as all at once."""
+    import tree.merge as tm
+
+    rng = np.random.default_rng(0)
+    lo = rng.uniform(0, 60, (300, 3))
+    boxes = np.c_[lo, lo + rng.uniform(0.2, 6, (300, 3))]
+    cls, grp = rng.choice([A, D], 300), rng.integers(0, 40, 300)
+    whole = merge_instances(np.arange(1, 301), cls, grp, boxes, 300)
+    monkeypatch.setattr(tm, "_PAIR_BLOCK", 1000)
+    np.testing.assert_array_equal(merge_instances(np.arange(1, 301), cls, grp, boxes, 300), whole)
+    assert (whole != np.arange(301)).sum() > 0

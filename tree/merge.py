@@ -1,0 +1,106 @@
+"""One element split over two element groups is one instance: the merge after the tree.
+
+The tree works on one element group at a time (the coarse stage's connected segments),
+so an arch whose front face went to one group and its soffit and back to another comes
+out as two arch instances, each about half the arch: neither covers it with IoU 0.5
+(Khudabad's 12 bays, docs/results.md). After every group's tree, two instances of the
+same class from different groups are one when their bounding boxes, each widened by
+``pad`` metres, overlap by at least ``min_overlap`` of the smaller widened box's volume
+and, along the wall (the horizontal axis on which the two boxes together are longer),
+by at least ``min_overlap`` of their joint length: the two halves of a bay share its
+span along the wall and its height, while neighbouring bays share only a pier's edge,
+stacked storeys only a band, and a bay lying inside the box of a large instance of
+another shape (a minaret's side called arch) only a small part of that box's length.
+Within a group the tree's own split stands. This is not in the paper (its tree never
+sees two groups at once).
+
+Pure NumPy.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from tiling.classes import ClassId
+
+__all__ = ["MERGE_CLASSES", "MERGE_MIN_OVERLAP", "MERGE_PAD", "merge_instances"]
+
+#: Classes whose instances are merged across element groups.
+MERGE_CLASSES: tuple[int, ...] = (int(ClassId.ARCH), int(ClassId.DOME), int(ClassId.MINARET))
+#: Widening of each instance's box (metres): a face (a plane, its box flat) gets a body.
+MERGE_PAD = 0.25
+#: Share of the smaller widened box that the two boxes' intersection must cover.
+MERGE_MIN_OVERLAP = 0.6
+_PAIR_BLOCK = 1 << 21
+
+
+def _find(parent: npt.NDArray[np.int64], i: int) -> int:
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = int(parent[i])
+    return i
+
+
+def merge_instances(instance: npt.ArrayLike, class_id: npt.ArrayLike, group: npt.ArrayLike,
+                    bbox: npt.ArrayLike, n_instances: int, *, classes: tuple[int, ...] = MERGE_CLASSES,
+                    pad: float = MERGE_PAD, min_overlap: float = MERGE_MIN_OVERLAP
+                    ) -> npt.NDArray[np.uint32]:
+    """The map from instance ids ``0..n_instances`` to merged ids (``map[0] == 0``; an
+    instance kept alone maps to itself, a merged set to its smallest id).
+
+    Parameters
+    ----------
+    instance : array-like of int, shape (m,)
+        Instance id of each instance's node (> 0).
+    class_id, group : array-like of int, shape (m,)
+        Its class and its element group (any id, e.g. the group's first segment).
+    bbox : array-like of float, shape (m, 6)
+        Its bounding box, ``xmin, ymin, zmin, xmax, ymax, zmax`` (metres).
+    n_instances : int
+        The largest instance id.
+
+    Examples
+    --------
+    >>> box = [[0, 0, 0, 4, 0, 6], [0, 0, 0, 4, 1.2, 8], [4, 0, 0, 8, 1.2, 8],  # a face, its bay, the next bay
+    ...        [4, -3, 0, 11, 6, 12]]  # and a large box around the next bay, of another group
+    >>> merge_instances([1, 2, 3, 4], [4, 4, 4, 4], [10, 11, 11, 12], box, 4).tolist()
+    [0, 1, 1, 3, 4]
+    """
+    inst = np.asarray(instance, dtype=np.int64).reshape(-1)
+    cls = np.asarray(class_id, dtype=np.int64).reshape(-1)
+    grp = np.asarray(group, dtype=np.int64).reshape(-1)
+    box = np.asarray(bbox, dtype=np.float64).reshape(-1, 6)
+    if not (len(inst) == len(cls) == len(grp) == len(box)):
+        raise ValueError("merge_instances needs one class, group and box per instance; got "
+                         f"{len(inst)} instances, {len(cls)} classes, {len(grp)} groups, {len(box)} boxes")
+    if len(inst) and (inst.min() < 1 or inst.max() > n_instances):
+        raise ValueError(f"The 'instance' parameter of merge_instances must hold ids in 1..{n_instances}.")
+    parent = np.arange(n_instances + 1, dtype=np.int64)
+    for c in classes:
+        sel = np.flatnonzero(cls == c)
+        if len(sel) < 2:
+            continue
+        lo, hi = box[sel, :3] - pad, box[sel, 3:] + pad
+        vol = np.prod(hi - lo, axis=1)
+        ids, g = inst[sel], grp[sel]
+        # Every pair of the class, _PAIR_BLOCK pairs at a time.
+        step = max(1, _PAIR_BLOCK // len(sel))
+        for r0 in range(0, len(sel), step):
+            r = slice(r0, r0 + step)
+            inter = np.prod(np.clip(np.minimum(hi[r, None], hi[None]) - np.maximum(lo[r, None], lo[None]), 0, None),
+                            axis=2)
+            # Along the wall: the horizontal axis on which the pair's union is longer.
+            span = np.maximum(hi[r, None, :2], hi[None, :, :2]) - np.minimum(lo[r, None, :2], lo[None, :, :2])
+            wall = np.argmax(span, axis=2)[..., None]
+            common = np.take_along_axis(np.clip(np.minimum(hi[r, None, :2], hi[None, :, :2])
+                                                - np.maximum(lo[r, None, :2], lo[None, :, :2]), 0, None), wall, 2)
+            ok = ((inter >= min_overlap * np.minimum(vol[r, None], vol[None]))
+                  & (common[..., 0] >= min_overlap * np.take_along_axis(span, wall, 2)[..., 0])
+                  & (g[r, None] != g[None]))
+            a, b = np.nonzero(ok)
+            for i, j in zip(ids[r][a].tolist(), ids[b].tolist(), strict=True):
+                ri, rj = _find(parent, i), _find(parent, j)
+                if ri != rj:
+                    parent[max(ri, rj)] = min(ri, rj)
+    return np.array([_find(parent, i) for i in range(n_instances + 1)], dtype=np.uint32)
