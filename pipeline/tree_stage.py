@@ -50,8 +50,9 @@ DECISIONS = ("split-model", "energy")
 #: tree-v4: a tall pillar is a minaret (tree/tall.py); tree-v5: the split model
 #: (tree/data/split-v1.json) refitted on coarse-v4 element groups; tree-v6: a storey cut
 #: at a solid band that reaches the node's top (tree.sequences.occupancy_cut, open_high),
-#: and a tall pillar with a flat footprint stays a pillar (tree.tall.MIN_FOOTPRINT_RATIO).
-TREE_ALGORITHM = "tree-v6"
+#: and a tall pillar with a flat footprint stays a pillar (tree.tall.MIN_FOOTPRINT_RATIO);
+#: tree-v7: the band between two storeys is a wall child of its own (SequenceParams.bands).
+TREE_ALGORITHM = "tree-v7"
 
 
 @dataclass(frozen=True, kw_only=True)

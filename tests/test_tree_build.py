@@ -77,7 +77,8 @@ def test_minaret_with_7_balconies_gives_8_stages_by_s1():
                 np.flatnonzero(np.isin(r.leaf, _descendants(r, k))) for k in kids]
     assert proposal_target(children, stage) >= 6 / 7
     # One element instance: the minaret; every point shares it.
-    assert len(r.instance_node) == 1 and set(r.instance.tolist()) == {1}
+    assert len(r.instance_node) == 1
+    assert set(r.instance.tolist()) == {1}
     assert set(r.class_id.tolist()) == {int(ClassId.MINARET)}
 
 
@@ -137,7 +138,8 @@ def test_straight_arcade_gives_one_child_per_bay_by_s2():
 def test_plain_dome_and_plain_wall_stay_leaves(name, cls):
     pts, _, clf = _segment(name, cls)
     r = build_tree(pts, clf, rng=0)
-    assert len(r.nodes) == 1 and r.nodes.is_leaf[0]
+    assert len(r.nodes) == 1
+    assert r.nodes.is_leaf[0]
     assert set(r.leaf.tolist()) == {0}
 
 
@@ -146,7 +148,9 @@ def test_tiny_segments_are_leaves(n):
     pts = np.random.default_rng(0).uniform(0, 1, (n, 3))
     clf = StandInClassifier(np.zeros((1, 3)), [int(ClassId.WALL)])
     r = build_tree(pts, clf, rng=0)
-    assert len(r.nodes) == 1 and len(r.leaf) == n and r.nodes.n_points[0] == n
+    assert len(r.nodes) == 1
+    assert len(r.leaf) == n
+    assert r.nodes.n_points[0] == n
 
 
 def test_same_input_and_seed_same_tree():
@@ -163,8 +167,11 @@ def test_node_table_records_every_node():
     pts, _, clf = _segment("arcade", ClassId.ARCH)
     r = build_tree(pts, clf, rng=0, max_depth=2)
     t = r.nodes
-    assert t.parent[0] == -1 and t.sequence[0] == 0 and np.isnan(t.xi[0])
-    assert np.all(t.depth[1:] == t.depth[t.parent[1:]] + 1) and t.depth.max() <= 2
+    assert t.parent[0] == -1
+    assert t.sequence[0] == 0
+    assert np.isnan(t.xi[0])
+    assert np.all(t.depth[1:] == t.depth[t.parent[1:]] + 1)
+    assert t.depth.max() <= 2
     assert np.all(t.xi[1:] >= load_energy_model().threshold)
     # Children partition their parent.
     for k in np.flatnonzero(~t.is_leaf):
@@ -175,5 +182,45 @@ def test_node_table_records_every_node():
 
 def test_energy_model_file_is_versioned_and_complete():
     m = load_energy_model()
-    assert m.version == 1 and len(m.weights) == 5 and m.W.shape == (NUM_CLASSES, 3)
-    assert np.isfinite(m.r2) and m.info["n_samples"] > 100
+    assert m.version == 1
+    assert len(m.weights) == 5
+    assert m.W.shape == (NUM_CLASSES, 3)
+    assert np.isfinite(m.r2)
+    assert m.info["n_samples"] > 100
+
+
+def test_a_kept_storeys_split_makes_its_bands_wall_children(monkeypatch):
+    """A storeys proposal is judged by its children at the bands' middles and, kept, makes
+    the children of its band ends; the band child is wall whatever the classifier says."""
+    import tree.build as tb
+    from tree.sequences import Proposal
+
+    rng = np.random.default_rng(0)
+    xyz = np.c_[rng.uniform(0, 20, 3000), np.zeros(3000), rng.uniform(0, 9, 3000)]
+    z = xyz[:, 2]
+    judged = (np.flatnonzero(z < 4.25), np.flatnonzero(z >= 4.25))
+    kept = (np.flatnonzero(z < 3.5), np.flatnonzero((z >= 3.5) & (z < 5.0)), np.flatnonzero(z >= 5.0))
+    calls = []
+
+    def one_proposal(pts, **kw):
+        if len(pts) < len(xyz):
+            return {1: None, 2: None, 3: None, 4: None}
+        return {4: Proposal(sequence=2, children=judged, cuts=np.array([4.25]), kept_children=kept,
+                            kept_cuts=np.array([3.5, 5.0]), kept_bands=(1,))}
+
+    class Arch:
+        def predict(self, segments):
+            calls.append([len(s) for s in segments])
+            n = len(segments)
+            prob = np.zeros((n, NUM_CLASSES - 1))
+            prob[:, int(ClassId.ARCH) - 1], prob[:, int(ClassId.WALL) - 1] = 0.9, 0.1
+            return np.full(n, int(ClassId.ARCH)), np.full(n, 0.9), prob
+
+    monkeypatch.setattr(tb, "propose", one_proposal)
+    res = build_tree(xyz, Arch(), max_depth=1, threshold=-np.inf)
+    kids = res.nodes.children(0)
+    assert [int(res.nodes.n_points[k]) for k in kids] == [len(c) for c in kept]
+    assert [int(res.nodes.class_id[k]) for k in kids] == [int(ClassId.ARCH), int(ClassId.WALL), int(ClassId.ARCH)]
+    assert res.nodes.score[kids[1]] == pytest.approx(0.1)
+    assert calls[1] == [len(c) for c in judged]
+    assert calls[2] == [len(c) for c in kept]

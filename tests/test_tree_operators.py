@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from tree.energy import e1, e2, e3, e4, e5, energy_terms
-from tree.operators import TransportCurve, fit_circle, h, p, psi, rho, split_at, u, v1, v2
-from tree.sequences import s1, s2, s3, storeys
+from tree.operators import TransportCurve, fit_circle, h, p, plateaus, psi, rho, split_at, u, v1, v2
+from tree.sequences import SequenceParams, s1, s2, s3, storeys
 
 
 def _ring(rng, *, center=(0.0, 0.0), radius=1.0, n=500, noise=0.0, arc=(0.0, 2 * math.pi)):
@@ -217,6 +217,41 @@ def test_storeys_cut_a_band_over_arches_that_reaches_the_top():
     # A plain wall and a wall with one door have no storeys.
     assert storeys(_facade(lambda t, z: np.ones_like(t, dtype=bool), top=7.0)) is None
     assert storeys(_facade(lambda t, z: (z > 2.2) | (np.abs(t - 10) > 0.6), top=7.0)) is None
+    # A band reaching the top has one end inside the node: no band child, the middle cut.
+    assert alone.kept_children is None
+
+
+def test_storeys_keep_the_band_between_two_storeys_as_a_child():
+    """Two storeys of arcades with a band between them (3.5 to 5 m): judged by the cut at
+    the band's middle, kept as bays / band / bays, the band marked (the tree calls it wall)."""
+    def two(t, z):
+        return ((z > 3.5) & (z < 5.0)) | (np.abs(t % 4.0 - 2.0) > 1.3)
+
+    prop = storeys(_facade(two, top=8.5))
+    assert prop is not None
+    assert prop.n_children == 2  # cut at the band's middle
+    assert prop.cuts[0] == pytest.approx(4.25, abs=0.3)
+    assert prop.kept_children is not None
+    assert len(prop.kept_children) == 3
+    assert prop.kept_cuts[0] == pytest.approx(3.5, abs=0.25)
+    assert prop.kept_cuts[1] == pytest.approx(5.0, abs=0.25)
+    assert prop.kept_bands == (1,)
+    kept = np.concatenate(prop.kept_children)
+    assert np.array_equal(np.sort(kept), np.arange(len(kept)))
+    off = storeys(_facade(two, top=8.5), params=SequenceParams(bands=False))
+    assert off.kept_children is None
+    np.testing.assert_array_equal(off.cuts, prop.cuts)
+
+
+def test_plateau_ends_from_each_side():
+    """A band between a low stretch (left) and a slightly lower one (right): per side,
+    the left end is found and the right one is NaN under min_drop."""
+    x = np.r_[np.linspace(0, 4, 400), np.repeat(np.linspace(4, 6, 200), 3), np.linspace(6, 10, 1000)]
+    hist = v2(x, n_fine=100, sigma=0.5)
+    pk = np.array([int(np.argmax(hist.values))])
+    start, stop = plateaus(hist, pk, level=0.9, per_side=True, min_drop=0.25)
+    assert start[0] == pytest.approx(4.0, abs=0.3)
+    assert np.isnan(stop[0])
 
 
 # --------------------------------------------------------------------------- energy

@@ -20,13 +20,15 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from tiling.classes import ELEMENT_CLASSES
+from tiling.classes import ELEMENT_CLASSES, ClassId
 from tree.energy import Classifier, EnergyModel, energy_terms, load_energy_model
 from tree.operators import RngLike
 from tree.sequences import Proposal, SequenceParams, propose
 from tree.split import N_PROBS, SplitModel, split_features
 
 __all__ = ["NodeTable", "TreeResult", "build_tree"]
+
+_WALL = int(ClassId.WALL)
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
@@ -257,8 +259,15 @@ def build_tree(
         pr, e, c_cls, c_sc, c_pr = cand[j_best]
         if not x >= (split.threshold if split is not None and threshold is None else thr):
             continue
+        children = pr.children
+        if pr.kept_children is not None:  # the storeys' bands, each a child (tree/sequences.py)
+            children = pr.kept_children
+            c_cls, c_sc, c_pr = _classify(classifier, [pts[c] for c in children])
+            for j in pr.kept_bands:  # solid across the wall's length: wall, whatever its look
+                c_cls[j] = _WALL
+                c_sc[j] = c_pr[j, _WALL - 1] if c_pr.shape[1] >= _WALL else c_sc[j]
         is_leaf[node] = False
-        for j, child in enumerate(pr.children):
+        for j, child in enumerate(children):
             cid = len(parent)
             gidx = idx[child]
             parent.append(node)

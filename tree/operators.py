@@ -38,6 +38,7 @@ __all__ = [
     "h",
     "p",
     "peak_bins",
+    "plateaus",
     "psi",
     "rho",
     "split_at",
@@ -737,6 +738,18 @@ def _refine(hist: Histogram, peaks: IntArray) -> FloatArray:
     signal stays above a quarter of the way from the higher of the region's two valleys
     to the maximum: the middle of a plateau (a pier, a balcony), not a spike on its edge.
     """
+    start, stop = plateaus(hist, peaks, level=0.25)
+    return 0.5 * (start + stop)
+
+
+def plateaus(hist: Histogram, peaks: npt.ArrayLike, *, level: float = 0.25, per_side: bool = False,
+             min_drop: float = 0.0) -> tuple[FloatArray, FloatArray]:
+    """Start and end of the plateau around each peak of limited bins ``peaks``: the run
+    around the peak's fine maximum where the fine signal stays above ``level`` of the way
+    from the higher of its region's two valleys to the maximum (:func:`rho` cuts at the
+    run's middle with ``level`` 0.25). ``per_side``: each end's level is measured from the
+    valley on its own side (a band between a low and a high stretch has both ends); an
+    end whose valley lies less than ``min_drop`` of the top below it is NaN (no end)."""
     fe, fv = hist.fine_edges, hist.fine_values
     nf = len(fv)
     tops = []
@@ -748,19 +761,23 @@ def _refine(hist: Histogram, peaks: IntArray) -> FloatArray:
     for a, b in zip(tops[:-1], tops[1:], strict=True):
         valleys.append(a + int(np.argmin(fv[a:b + 1])) if b > a else a)
     valleys.append(nf - 1)
-    out = []
+    start, stop = [], []
     for i, j in enumerate(tops):
         lo, hi = valleys[i], max(valleys[i + 1], j)
-        ref = max(float(fv[lo:j + 1].min()), float(fv[j:hi + 1].min()))
-        level = ref + 0.25 * (float(fv[j]) - ref)
+        left, right = float(fv[lo:j + 1].min()), float(fv[j:hi + 1].min())
+        if not per_side:
+            left = right = max(left, right)
+        top = float(fv[j])
+        cut_a, cut_b = left + level * (top - left), right + level * (top - right)
         a = j
-        while a > lo and fv[a - 1] >= level:
+        while a > lo and fv[a - 1] >= cut_a:
             a -= 1
         b = j
-        while b < hi and fv[b + 1] >= level:
+        while b < hi and fv[b + 1] >= cut_b:
             b += 1
-        out.append(0.5 * (fe[a] + fe[b + 1]))
-    return np.asarray(out, dtype=np.float64)
+        start.append(fe[a] if top - left >= min_drop * top else np.nan)
+        stop.append(fe[b + 1] if top - right >= min_drop * top else np.nan)
+    return np.asarray(start, dtype=np.float64), np.asarray(stop, dtype=np.float64)
 
 
 def split_at(x: npt.ArrayLike, cuts: npt.ArrayLike) -> list[IntArray]:

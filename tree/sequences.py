@@ -38,6 +38,7 @@ from tree.operators import (
     h,
     p,
     peak_bins,
+    plateaus,
     psi,
     rho,
     u,
@@ -56,6 +57,9 @@ SEQUENCES: tuple[int, ...] = (1, 2, 3)
 #: How far (a share of its height) a solid band reaching the top of a node must stand
 #: above the occupancy below it to be a storey cut (:func:`occupancy_cut`).
 OPEN_HIGH_PROMINENCE = 0.25
+#: Where a band ends (:func:`occupancy_cut` with ``bands``): the occupancy is this share
+#: of the way from the valley on that side to the band's top.
+BAND_LEVEL = 0.9
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -87,6 +91,9 @@ class SequenceParams:
         plain point count (the histogram follows the scan's density).
     storeys : bool
         Also propose a cut along the height from the same occupancy (:func:`storeys`).
+    bands : bool
+        A kept storeys split makes each solid band (the wall over a row of arches) a child
+        of its own, cut at both its ends (:data:`BAND_LEVEL`), instead of halving it.
     """
 
     prominence: float = 0.05
@@ -99,6 +106,7 @@ class SequenceParams:
     flat_height: float = 0.5
     cell: float = 0.1
     storeys: bool = True
+    bands: bool = True
 
     def to_dict(self) -> dict[str, object]:
         return dict(self.__dict__)
@@ -122,12 +130,21 @@ class Proposal:
         Cut positions along the sequence's axis (z for S1, t for S2, arc length for S3).
     curve : TransportCurve or None
         The transport curve (S1, S3).
+    kept_children, kept_cuts : optional
+        The children made when the proposal is kept, when they differ from those it is
+        judged by (the storeys: judged by their cuts at the bands' middles, as the split
+        model was fitted, kept with each band a child of its own; ``SequenceParams.bands``).
+    kept_bands : tuple of int
+        Which of ``kept_children`` are bands (the tree calls them wall).
     """
 
     sequence: int
     children: tuple[IntArray, ...]
     cuts: FloatArray
     curve: TransportCurve | None = None
+    kept_children: tuple[IntArray, ...] | None = None
+    kept_cuts: FloatArray | None = None
+    kept_bands: tuple[int, ...] = ()
 
     @property
     def n_children(self) -> int:
@@ -305,8 +322,21 @@ def storeys(xyz: npt.ArrayLike, *, params: SequenceParams | None = None,
         return None
     pz = u(a, curve) if curve is not None else h(a)
     seq = 3 if curve is not None else 2
-    cuts = occupancy_cut(pz[:, 1], pz[:, 0], params, open_high=True)
-    return _finish(seq, pz[:, 1], cuts, params, curve)
+    cuts, bands = occupancy_cut(pz[:, 1], pz[:, 0], params, open_high=True, bands=True)
+    prop = _finish(seq, pz[:, 1], cuts, params, curve)
+    if prop is None or not params.bands or not len(bands):
+        return prop
+    banded = _finish(seq, pz[:, 1], np.unique(bands), params, curve)
+    if banded is None or banded.n_children <= prop.n_children:
+        return prop
+    # A child between the two ends of one band is that band.
+    is_band = tuple(bool(np.isin(banded.cuts[k - 1], bands[:, 0]) and np.isin(banded.cuts[k], bands[:, 1])
+                         and np.flatnonzero(bands[:, 0] == banded.cuts[k - 1]).tolist()
+                         == np.flatnonzero(bands[:, 1] == banded.cuts[k]).tolist())
+                    for k in range(1, banded.n_children - 1))
+    return Proposal(sequence=seq, children=prop.children, cuts=prop.cuts, curve=curve,
+                    kept_children=banded.children, kept_cuts=banded.cuts,
+                    kept_bands=tuple(k + 1 for k, b in enumerate(is_band) if b))
 
 
 def _open_high(hist: Histogram) -> Histogram:
@@ -322,7 +352,7 @@ def _open_high(hist: Histogram) -> Histogram:
 
 
 def occupancy_cut(x: FloatArray, y: FloatArray, params: SequenceParams, *,
-                  open_high: bool = False) -> FloatArray:
+                  open_high: bool = False, bands: bool = False) -> FloatArray | tuple[FloatArray, FloatArray]:
     """Cuts along ``x`` at the peaks of the wall's occupancy: how many cells of
     ``params.cell`` x ``params.cell`` in the ``(x, y)`` projection hold a point, per
     position along ``x``.
@@ -340,32 +370,46 @@ def occupancy_cut(x: FloatArray, y: FloatArray, params: SequenceParams, *,
     Such a top peak counts when it stands at least :data:`OPEN_HIGH_PROMINENCE` of its
     height above the signal below it (a row of openings, not a door in a plain wall);
     a plain wall, solid all the way, has none.
+
+    ``bands`` (the storeys): also the bands, each peak's plateau with two ends inside
+    ``x`` (each end measured from the valley on its own side, at :data:`BAND_LEVEL` of the
+    way to the top; a side whose valley lies less than :data:`OPEN_HIGH_PROMINENCE` of the
+    top below it has no end): returns ``(cuts, bands)``, ``bands`` of shape (m, 2).
     """
     kw = dict(sigma=params.sigma, bins_per_crossing=params.bins_per_crossing)
     if len(x) == 0:
-        return np.empty(0)
+        return (np.empty(0), np.empty(0)) if bands else np.empty(0)
     if params.cell <= 0:
         hist = v2(x, statistic="count", **kw)  # type: ignore[arg-type]
-        return _cuts(hist, params.prominence, open_high)
+        return _cuts(hist, params.prominence, open_high, bands)
     x0, y0 = float(x.min()), float(y.min())
     kx = ((x - x0) * (1.0 / params.cell)).astype(np.int64)
     ky = ((y - y0) * (1.0 / params.cell)).astype(np.int64)
     _, first = np.unique(kx * (int(ky.max()) + 1) + ky, return_index=True)
     n_fine = int(np.clip(np.ceil((float(x.max()) - x0) / params.cell), 16, 1024))
     hist = v2(x[first], statistic="count", n_fine=n_fine, **kw)  # type: ignore[arg-type]
-    return _cuts(hist, params.prominence, open_high)
+    return _cuts(hist, params.prominence, open_high, bands)
 
 
-def _cuts(hist: Histogram, prominence: float, open_high: bool) -> FloatArray:
-    """``rho``'s cuts, plus, with ``open_high``, the top plateau's (see :func:`occupancy_cut`)."""
+def _cuts(hist: Histogram, prominence: float, open_high: bool,
+          bands: bool) -> FloatArray | tuple[FloatArray, FloatArray]:
+    """``rho``'s cuts, plus, with ``open_high``, the top plateau's; with ``bands`` also the
+    plateaus' ends (see :func:`occupancy_cut`)."""
+    lo, hi = float(hist.fine_edges[0]), float(hist.fine_edges[-1])
     peaks = peak_bins(hist, prominence=prominence)
     if open_high:
         padded = _open_high(hist)
         top = peak_bins(padded, prominence=max(prominence, OPEN_HIGH_PROMINENCE))
         top = top[top > (peaks.max() if len(peaks) else -1)][-1:]
         if len(top):
-            return _refine(padded, np.r_[peaks, top])
-    return _refine(hist, peaks)
+            hist, peaks = padded, np.r_[peaks, top]
+    cuts = _refine(hist, peaks)
+    if not bands:
+        return cuts
+    start, stop = plateaus(hist, peaks, level=BAND_LEVEL, per_side=True, min_drop=OPEN_HIGH_PROMINENCE)
+    margin = 2.0 * float(hist.fine_edges[1] - hist.fine_edges[0])
+    inside = np.isfinite(start) & np.isfinite(stop) & (start > lo + margin) & (stop < hi - margin)
+    return cuts, np.column_stack([start, stop])[inside]
 
 
 def propose(xyz: npt.ArrayLike, *, params: SequenceParams | None = None,
