@@ -14,9 +14,11 @@ from collections.abc import Callable
 
 import numpy as np
 
+from scenes._builders import add_arcade
 from scenes.elements import (
     ArcPath,
     StraightPath,
+    _crown,
     arcade,
     bastion,
     bench,
@@ -32,8 +34,6 @@ from scenes.elements import (
     tree,
     wall,
 )
-from scenes._builders import add_arcade
-from scenes.elements import _crown
 from scenes.mesh import TriMesh
 from scenes.scene import Scene, SceneBuilder
 from scenes.shapes import box, ellipsoid

@@ -216,7 +216,8 @@ def test_evaluate_seeds_runs_each_input_once_per_seed(evaluated):
     (first,), ((second,),) = out["sites"], out["repeats"]
     assert first["seeds"] == {"coarse": 0, "tree": 0}
     assert second["seeds"] == {"coarse": 1, "tree": 1}
-    assert first["store"].endswith("dome.zarr") and second["store"].endswith("dome-seed1.zarr")
+    assert first["store"].endswith("dome.zarr")
+    assert second["store"].endswith("dome-seed1.zarr")
     assert (d / "stores" / "dome-seed1.zarr").is_dir()
     spread = out["spread"]["sites"]["dome"]
     ious = [s["methods"]["tree"]["mean_iou_pct"] for s in (first, second)]
@@ -258,7 +259,8 @@ def test_seed_spread_by_hand():
     assert s["all"]["tree_minus_ransac+dbscan"]["values"] == pytest.approx(
         [100.0 - wrong.mean_iou_pct, (100.0 - wrong.mean_iou_pct) / 2])
     text = format_spread(s)
-    assert "over 2 seeds" in text and "2.5 (2.0 to 3.0) / 4" in text
+    assert "over 2 seeds" in text
+    assert "2.5 (2.0 to 3.0) / 4" in text
     with pytest.raises(ValueError, match="same inputs"):
         seed_spread([runs[0], runs[1][:1]])
 
@@ -271,10 +273,12 @@ def test_seeds_with_a_run_store_is_one_line_exit_2(tmp_path):
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1, proc.stderr
-    assert str(store) in lines[0] and "--seeds 3" in lines[0]
+    assert str(store) in lines[0]
+    assert "--seeds 3" in lines[0]
     proc = _cli("evaluate", "dome", "--seeds", "0", "--store-dir", str(tmp_path / "x"))
     assert proc.returncode == 2
-    assert "--seeds" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert "--seeds" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "x").exists()
 
 

@@ -72,8 +72,10 @@ outputs: {{las: {tmp_path / 'o.las'}}}
     (tile,) = store.attrs["ingest"]["tiles"]
     xyz = np.c_[src.x, src.y, src.z]
     inside = grid.core_tile(xyz, outside="flag") == tile
-    assert inside.any() and (~inside).any()
-    assert (lab["segment"][~inside] == 0).all() and (lab["primitive"][~inside] == 0).all()
+    assert inside.any()
+    assert (~inside).any()
+    assert (lab["segment"][~inside] == 0).all()
+    assert (lab["primitive"][~inside] == 0).all()
     assert (lab["segment"][inside] > 0).mean() > 0.3
     # voxel-dropped points carry exactly their representative's labels
     d = store.read_unit(f"tiles/{tile}", ["voxel_dropped", "voxel_representative"])
@@ -106,7 +108,8 @@ def test_large_groups_are_built_on_a_sample(tmp_path, scan):
         assert t["n_points"][roots[0]] == n
         assert sum(k for k, leaf in zip(t["n_points"], t["is_leaf"], strict=True) if leaf) == n
         leaf = store.read_slice(f"tree/batches/{b}/leaf")
-        assert len(leaf) == n and set(np.unique(leaf).tolist()) <= {i for i, x in enumerate(t["is_leaf"]) if x}
+        assert len(leaf) == n
+        assert set(np.unique(leaf).tolist()) <= {i for i, x in enumerate(t["is_leaf"]) if x}
     assert (sampled["class"] == full["class"]).mean() > 0.8
 
 

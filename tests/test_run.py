@@ -86,7 +86,8 @@ def test_local_run_labels_every_point(reference, scan):
     assert (seg > 0).mean() > 0.5
     assert set(np.unique(lab["class"]).tolist()) <= {int(c) for c in ClassId}
     assert (lab["class"][seg > 0] > 0).all()
-    assert "class" in reference["stdout"] and "done in" in reference["stdout"]
+    assert "class" in reference["stdout"]
+    assert "done in" in reference["stdout"]
 
 
 def test_rerun_after_completion_does_nothing(reference):
@@ -143,7 +144,8 @@ def test_second_run_on_a_store_in_use_is_refused(reference):
     with StoreLock(reference["store"]):
         proc = _cli("run", str(reference["workflow"]), "--no-progress")
     assert proc.returncode == 2
-    assert "in use by another run" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert "in use by another run" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
 
 
 def test_status_reports_every_stage(reference):

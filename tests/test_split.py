@@ -8,9 +8,21 @@ import numpy as np
 import pytest
 
 from tree.build import _per_point, build_tree
-from tree.fit_split import SplitSamples, _node_decisions, fit_split_model, proposal_samples, proposal_target
 from tree.energy import load_energy_model
-from tree.split import DEFAULT_SPLIT_PATH, FEATURE_NAMES, SplitModel, load_split_model, split_features
+from tree.fit_split import (
+    SplitSamples,
+    _node_decisions,
+    fit_split_model,
+    proposal_samples,
+    proposal_target,
+)
+from tree.split import (
+    DEFAULT_SPLIT_PATH,
+    FEATURE_NAMES,
+    SplitModel,
+    load_split_model,
+    split_features,
+)
 
 
 def _features(rng, n):
@@ -34,13 +46,17 @@ def test_features_have_the_named_columns():
                        parent_probs=np.eye(8)[1], child_sizes=[1000, 1000, 2000], child_classes=[4, 4, 2],
                        child_probs=np.eye(8)[[3, 3, 1]], cuts=[2.0, 4.0])
     d = dict(zip(FEATURE_NAMES, f.tolist(), strict=True))
-    assert d["n_children"] == 3 and d["seq_storeys"] == 1 and d["seq_s2"] == 0 and d["depth"] == 1
+    assert d["n_children"] == 3
+    assert d["seq_storeys"] == 1
+    assert d["seq_s2"] == 0
+    assert d["depth"] == 1
     assert d["children_element"] == pytest.approx(0.5)      # the two arch children hold half the points
     assert d["children_as_parent"] == pytest.approx(0.5)    # the wall child holds the other half
     assert d["children_agree"] == pytest.approx(0.5)
     assert d["cut_spacing_cv"] == -1.0                     # one gap: no spacing to compare
     assert d["log10_extent_long"] == pytest.approx(np.log10(12.001))
-    assert d["p_parent_wall"] == 1.0 and d["p_children_arch"] == pytest.approx(0.5)
+    assert d["p_parent_wall"] == 1.0
+    assert d["p_children_arch"] == pytest.approx(0.5)
     with pytest.raises(ValueError, match="8 classes"):
         split_features(n_parent=4000, extent=[1, 1, 1], depth=0, key=1, parent_class=2, parent_probs=np.ones(9),
                        child_sizes=[1, 1], child_classes=[2, 2], child_probs=np.ones((2, 9)), cuts=[0.5])
@@ -55,7 +71,8 @@ def test_model_from_sklearn_gives_sklearn_probabilities_and_survives_json(tmp_pa
     np.testing.assert_allclose(m.probability(x), gb.predict_proba(x)[:, 1], atol=1e-12)
     m.save(tmp_path / "m.json")
     back = load_split_model(tmp_path / "m.json")
-    assert back.threshold == 0.4 and back.info == {"note": "test"}
+    assert back.threshold == 0.4
+    assert back.info == {"note": "test"}
     np.testing.assert_allclose(back.probability(x), m.probability(x), atol=1e-12)
 
 
@@ -71,8 +88,12 @@ def test_model_for_other_features_is_refused(tmp_path):
 
 def test_shipped_model_is_versioned_and_cross_validated():
     m = load_split_model()
-    assert m.version == 1 and 0 < m.threshold < 1 and len(m.trees) > 10
-    assert m.info["cv_auc"] > 0.85 and m.info["right"] > 100 and m.info["scenes"] >= 50
+    assert m.version == 1
+    assert 0 < m.threshold < 1
+    assert len(m.trees) > 10
+    assert m.info["cv_auc"] > 0.85
+    assert m.info["right"] > 100
+    assert m.info["scenes"] >= 50
 
 
 def test_fit_learns_a_separable_rule_and_reports_cross_validation():
@@ -80,7 +101,8 @@ def test_fit_learns_a_separable_rule_and_reports_cross_validation():
     scene = np.asarray([f"s{i % 8}" for i in range(len(y))])
     samples = SplitSamples(features=x, target=y, node=np.asarray([f"n{i}" for i in range(len(y))]), scene=scene)
     m = fit_split_model(samples, threshold=0.5)
-    assert m.info["cv_auc"] > 0.95 and m.info["samples"] == 400
+    assert m.info["cv_auc"] > 0.95
+    assert m.info["samples"] == 400
     x2, y2 = _features(np.random.default_rng(2), 200)
     assert ((m.probability(x2) >= 0.5) == (y2 >= 0.5)).mean() > 0.95
     with pytest.raises(ValueError, match="both right and wrong"):
@@ -130,7 +152,8 @@ def test_proposal_samples_mark_the_bays_of_an_arcade_right():
     bay = np.minimum((pts[:, 0] // 2.0).astype(int), 5)
     gc = np.full(len(pts), 4)
     s = proposal_samples(pts, gc, bay + 1, np.array([0, len(pts)]), _Agreeing(), scene="piers", min_node=100)
-    assert s.features.shape[1] == len(FEATURE_NAMES) and len(s) >= 2
+    assert s.features.shape[1] == len(FEATURE_NAMES)
+    assert len(s) >= 2
     wall = s.node == "piers/0/0"
     assert s.target[wall].max() >= 0.5     # S2 cuts the wall at its piers: one child per bay
     assert np.all(s.target[~wall] == 0.0)   # the bays are nodes too, and no split of one bay is right
@@ -141,7 +164,8 @@ def test_tree_with_the_split_model_keeps_or_refuses_by_its_probability():
     always = SplitModel(init=5.0, learning_rate=0.1, trees=(), threshold=0.5)
     never = SplitModel(init=-5.0, learning_rate=0.1, trees=(), threshold=0.5)
     r = build_tree(pts, _Agreeing(), split=always, rng=0, max_depth=1)
-    assert len(r.nodes.children(0)) >= 2 and np.all(r.nodes.xi[1:] > 0.99)
+    assert len(r.nodes.children(0)) >= 2
+    assert np.all(r.nodes.xi[1:] > 0.99)
     r = build_tree(pts, _Agreeing(), split=never, rng=0)
     assert len(r.nodes) == 1
     r = build_tree(pts, _Agreeing(), split=never, threshold=0.001, rng=0, max_depth=1)
@@ -181,8 +205,10 @@ def test_fit_split_cli_refuses_bad_arguments_before_any_work(tmp_path):
         proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "fit-split", "--work", str(work), *args,
                                "--no-progress"], capture_output=True, text=True, timeout=120)
         assert proc.returncode == 2, proc.stderr
-        assert words in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
-    assert out.read_text() == "{}" and not work.exists()
+        assert words in proc.stderr
+        assert len(proc.stderr.strip().splitlines()) == 1
+    assert out.read_text() == "{}"
+    assert not work.exists()
 
 
 def test_energy_decision_is_still_the_papers(tmp_path):
@@ -199,7 +225,8 @@ def test_storeyed_arcades_are_seeded_storeys_of_arch_bays():
 
     a = storeyed_arcades(np.random.default_rng([7, 100]))
     b = storeyed_arcades(np.random.default_rng([7, 100]))
-    assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.face_instance, b.face_instance)
+    assert np.array_equal(a.vertices, b.vertices)
+    assert np.array_equal(a.face_instance, b.face_instance)
     names = [e.name for e in a.elements]
     storeys = {n.split(" bay ")[0] for n in names if " bay " in n}
     assert len(storeys) in (2, 3)

@@ -67,7 +67,8 @@ def test_unit_writer_round_trip(store, n_rows, known):
     back = store.read_unit("tiles/0")
     assert back.keys() == data.keys()
     for k, v in data.items():
-        assert back[k].dtype == v.dtype and np.array_equal(back[k], v), k
+        assert back[k].dtype == v.dtype, k
+        assert np.array_equal(back[k], v), k
 
 
 def test_unit_writer_refuses_more_rows_than_announced(store):

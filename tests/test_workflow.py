@@ -93,7 +93,9 @@ def test_cli_bad_workflow_exits_2_and_writes_nothing(tmp_path):
                           capture_output=True, text=True, cwd=tmp_path)
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and "coarse.epsilon" in lines[0] and ":5:" in lines[0]
+    assert len(lines) == 1
+    assert "coarse.epsilon" in lines[0]
+    assert ":5:" in lines[0]
     assert not store.exists()
     assert list(tmp_path.iterdir()) == [path]
 
@@ -103,7 +105,8 @@ def test_changed_stages_names_the_first_changed_stage_and_all_after():
     assert changed_stages(base, base) == ([], [])
     assert changed_stages(None, base) == ([], [])
     redo, diffs = changed_stages(base, {**base, "tree": {"max_depth": 4}})
-    assert redo == ["tree", "labels"] and diffs == ["tree.max_depth: 3 -> 4"]
+    assert redo == ["tree", "labels"]
+    assert diffs == ["tree.max_depth: 3 -> 4"]
     redo, _ = changed_stages(base, {**base, "ingest": {"voxel": 0.05}})
     assert redo == ["ingest", "coarse", "tree", "labels"]
 
