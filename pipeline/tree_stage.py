@@ -38,7 +38,7 @@ from pipeline.coarse import _read_table, _write_table
 from tiling.classes import PLANAR_CLASSES
 from tiling.errors import ConfigError, PipelineError
 from tiling.store import RunStore
-from tree.tall import TallPillars
+from tree.tall import TallPillars, short_minarets
 
 __all__ = ["TreeStageParams", "tree_batch", "run_tree", "TreeReport", "plan_batches", "group_starts"]
 
@@ -51,8 +51,9 @@ DECISIONS = ("split-model", "energy")
 #: (tree/data/split-v1.json) refitted on coarse-v4 element groups; tree-v6: a storey cut
 #: at a solid band that reaches the node's top (tree.sequences.occupancy_cut, open_high),
 #: and a tall pillar with a flat footprint stays a pillar (tree.tall.MIN_FOOTPRINT_RATIO);
-#: tree-v7: the band between two storeys is a wall child of its own (SequenceParams.bands).
-TREE_ALGORITHM = "tree-v7"
+#: tree-v7: the band between two storeys is a wall child of its own (SequenceParams.bands);
+#: tree-v8: a minaret instance not taller than tree.pillar_max_height is a pillar.
+TREE_ALGORITHM = "tree-v8"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -201,6 +202,14 @@ def _group_tree(pts: np.ndarray, s: int, params: TreeStageParams, clf: Any, grou
         res_class = ground_or_roof(res.class_id, pts[:, 2], res.leaf, ground_level, params.roof_min_height)
     else:
         res_class = res.class_id
+    node_class = res.nodes.class_id
+    if params.pillar_max_height is not None and len(res.instance_node):
+        # A minaret instance not taller than a pillar is a pillar (tree/tall.py).
+        box = res.nodes.bbox[res.instance_node]
+        inst_class = short_minarets(node_class[res.instance_node], box[:, 5] - box[:, 2], params.pillar_max_height)
+        node_class = node_class.copy()
+        node_class[res.instance_node] = inst_class
+        res_class = np.where(res.instance > 0, inst_class[np.maximum(res.instance, 1) - 1], res_class)
     inst = np.where(res.instance > 0, res.instance + n_inst, 0).astype(np.uint32)
     node_inst = np.zeros(len(res.nodes), np.int64)
     node_inst[res.instance_node] = np.arange(1, len(res.instance_node) + 1) + n_inst
@@ -216,6 +225,8 @@ def _group_tree(pts: np.ndarray, s: int, params: TreeStageParams, clf: Any, grou
     for c in _NODE_COLUMNS[1:]:
         if c == "instance":
             cols[c] = node_inst.tolist()
+        elif c == "class_id":
+            cols[c] = node_class.tolist()
         elif c in ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax"):
             j = ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax").index(c)
             cols[c] = (res.nodes.bbox[:, j] + center[j % 3]).tolist()

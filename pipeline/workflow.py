@@ -154,7 +154,7 @@ class TreeSection(_Section):
         1_000_000, description="an element group with more points builds its tree on a seeded sample of this many (0 or at least 1000); its points take their nearest sampled point's labels (bounded memory); 0 = never sample")
 
     pillar_max_height: Annotated[float, Field(gt=0)] | None = Field(
-        10.0, description="a part HollowNet calls pillar that is taller than this (m) is a minaret (HollowNet cannot see size; its training pillars are 2.5-8 m, its minarets 12-40 m); null = HollowNet's class as it is")
+        10.0, description="a part HollowNet calls pillar that is taller than this (m) is a minaret unless its footprint is flat, and a minaret instance not taller than this is a pillar (HollowNet cannot see size; its training pillars are 2.5-8 m, its minarets 12-40 m); null = HollowNet's class as it is")
 
     @field_validator("max_group_points")
     @classmethod

@@ -77,3 +77,37 @@ def test_tree_params_validate_the_bound():
     for bad in (0.0, -1.0, float("inf")):
         with pytest.raises(ConfigError, match="pillar_max_height"):
             TreeStageParams(pillar_max_height=bad)
+
+
+class _AlwaysMinaret:
+    """A stand-in classifier that calls every part a minaret (score 0.9)."""
+
+    def predict(self, segments):
+        n = len(segments)
+        prob = np.zeros((n, 8))
+        prob[:, M - 1] = 0.9
+        return np.full(n, M), np.full(n, 0.9), prob
+
+
+def test_short_minarets_are_pillars_per_instance_in_the_tree_stage():
+    """A dome's finial (2 m) that HollowNet calls minaret is a pillar; a 25 m shaft stays a
+    minaret. The rule works on whole instances, and the node table holds the result."""
+    from pipeline.tree_stage import _group_tree
+    from tree.tall import short_minarets
+
+    assert short_minarets([M, M, P], [2.0, 25.0, 2.0], 10.0).tolist() == [P, M, P]
+    with pytest.raises(ValueError, match="height"):
+        short_minarets([M], [1.0, 2.0], 10.0)
+    rng = np.random.default_rng(3)
+    t = rng.uniform(0, 2 * np.pi, 3000)
+    params = TreeStageParams(max_depth=0, roof_min_height=None)
+    for height, want in ((2.0, P), (25.0, M)):
+        xyz = np.c_[0.3 * np.cos(t), 0.3 * np.sin(t), rng.uniform(0, height, 3000)]
+        values, cols, n_inst = _group_tree(xyz, 0, params, _AlwaysMinaret(), None, 0)
+        assert set(values["class"].tolist()) == {want}
+        assert cols["class_id"] == [want]
+        assert n_inst == 1
+    off = TreeStageParams(max_depth=0, roof_min_height=None, pillar_max_height=None)
+    values, _, _ = _group_tree(np.c_[0.3 * np.cos(t), 0.3 * np.sin(t), rng.uniform(0, 2.0, 3000)], 0, off,
+                               _AlwaysMinaret(), None, 0)
+    assert set(values["class"].tolist()) == {M}

@@ -12,6 +12,14 @@ side is under :data:`MIN_FOOTPRINT_RATIO` of its long side stay pillars. Like
 :mod:`tree.ground`, this is not in the paper. Only the class changes; the score and the
 probabilities stay HollowNet's.
 
+The mirror rule, :func:`short_minarets`: an element instance HollowNet calls minaret that
+is not taller than the same bound is a pillar (a dome's finial in a group of its own, the
+top stage of a minaret cut off by the coarse stage). The tree stage applies it to whole
+instances after the tree (:func:`pipeline.tree_stage._group_tree`), not to every node: a
+minaret's stages, each a few metres tall, are children the split model judges by their
+classes. The baselines of ``hollowtree evaluate`` do not get it: their segments are pieces
+(a minaret is many short primitives), not instances.
+
 Pure NumPy.
 """
 
@@ -26,7 +34,7 @@ import numpy.typing as npt
 
 from tiling.classes import ClassId
 
-__all__ = ["MIN_FOOTPRINT_RATIO", "TallPillars", "footprint_ratio", "tall_pillars"]
+__all__ = ["MIN_FOOTPRINT_RATIO", "TallPillars", "footprint_ratio", "short_minarets", "tall_pillars"]
 
 #: A tall pillar whose footprint's short side is under this share of its long side is
 #: flat (a strip of wall), not a minaret. Minarets and bastions of the five synthetic
@@ -78,6 +86,23 @@ def tall_pillars(class_id: npt.ArrayLike, height: npt.ArrayLike, max_height: flo
             raise ValueError(f"The '{name}' parameter of tall_pillars must have one entry per class ({len(c)}). "
                              f"Got {len(v)} instead.")
     c[(c == int(ClassId.PILLAR)) & (h > max_height) & (r >= MIN_FOOTPRINT_RATIO)] = int(ClassId.MINARET)
+    return c
+
+
+def short_minarets(class_id: npt.ArrayLike, height: npt.ArrayLike, max_height: float) -> npt.NDArray[np.uint8]:
+    """``class_id`` with every minaret not taller than ``max_height`` (metres) made a pillar.
+
+    Examples
+    --------
+    >>> short_minarets([6, 6, 7, 2], [2.1, 30.0, 2.1, 2.1], 10.0).tolist()
+    [7, 6, 7, 2]
+    """
+    c = np.asarray(class_id).astype(np.uint8, copy=True).reshape(-1)
+    h = np.asarray(height, dtype=np.float64).reshape(-1)
+    if len(h) != len(c):
+        raise ValueError(f"The 'height' parameter of short_minarets must have one entry per class ({len(c)}). "
+                         f"Got {len(h)} instead.")
+    c[(c == int(ClassId.MINARET)) & (h <= max_height)] = int(ClassId.PILLAR)
     return c
 
 
