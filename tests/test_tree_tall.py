@@ -14,14 +14,17 @@ from tree.tall import TallPillars, tall_pillars
 P, M, W = int(ClassId.PILLAR), int(ClassId.MINARET), int(ClassId.WALL)
 
 
-class _AlwaysPillar:
-    """A stand-in classifier that calls every part a pillar (score 0.8)."""
+class _Always:
+    """A stand-in classifier that calls every part ``cls`` (score 0.8)."""
+
+    def __init__(self, cls):
+        self.cls = cls
 
     def predict(self, segments):
         n = len(segments)
         prob = np.zeros((n, 8))
-        prob[:, P - 1] = 0.8
-        return np.full(n, P), np.full(n, 0.8), prob
+        prob[:, self.cls - 1] = 0.8
+        return np.full(n, self.cls), np.full(n, 0.8), prob
 
 
 def test_tall_pillars_change_pillars_only():
@@ -37,12 +40,12 @@ def test_wrapper_uses_each_parts_height_and_keeps_scores():
     rng = np.random.default_rng(0)
     column = rng.uniform(0, 1, (500, 3)) * [0.5, 0.5, 6.0]
     minaret = rng.uniform(0, 1, (500, 3)) * [3.0, 3.0, 30.0]
-    cls, score, prob = TallPillars(_AlwaysPillar(), 10.0).predict([column, minaret, np.zeros((0, 3))])
+    cls, score, prob = TallPillars(_Always(P), 10.0).predict([column, minaret, np.zeros((0, 3))])
     assert cls.tolist() == [P, M, P]
     np.testing.assert_array_equal(score, 0.8)
     assert prob.shape == (3, 8)
     with pytest.raises(ValueError, match="max_height"):
-        TallPillars(_AlwaysPillar(), 0.0)
+        TallPillars(_Always(P), 0.0)
 
 
 def test_the_tree_labels_a_tall_pillar_a_minaret():
@@ -50,8 +53,8 @@ def test_the_tree_labels_a_tall_pillar_a_minaret():
     t = rng.uniform(0, 2 * np.pi, 4000)
     z = rng.uniform(0, 25.0, 4000)
     xyz = np.c_[1.5 * np.cos(t), 1.5 * np.sin(t), z]  # a plain 25 m shaft
-    plain = build_tree(xyz, _AlwaysPillar(), rng=0)
-    sized = build_tree(xyz, TallPillars(_AlwaysPillar(), 10.0), rng=0)
+    plain = build_tree(xyz, _Always(P), rng=0)
+    sized = build_tree(xyz, TallPillars(_Always(P), 10.0), rng=0)
     assert set(plain.class_id.tolist()) == {P}
     assert sized.nodes.class_id[0] == M
     assert (sized.instance > 0).all()
@@ -65,7 +68,7 @@ def test_a_tall_flat_strip_stays_a_pillar():
     jamb = np.c_[u * 0.6, u * 0.8, z]
     t = rng.uniform(0, np.pi, 3000)
     half = np.c_[1.5 * np.cos(t), 1.5 * np.sin(t), z]
-    cls, _, _ = TallPillars(_AlwaysPillar(), 10.0).predict([jamb, half])
+    cls, _, _ = TallPillars(_Always(P), 10.0).predict([jamb, half])
     assert cls.tolist() == [P, M]
     with pytest.raises(ValueError, match="ratio"):
         tall_pillars([P], [20.0], 10.0, ratio=[0.5, 0.5])
@@ -77,16 +80,6 @@ def test_tree_params_validate_the_bound():
     for bad in (0.0, -1.0, float("inf")):
         with pytest.raises(ConfigError, match="pillar_max_height"):
             TreeStageParams(pillar_max_height=bad)
-
-
-class _AlwaysMinaret:
-    """A stand-in classifier that calls every part a minaret (score 0.9)."""
-
-    def predict(self, segments):
-        n = len(segments)
-        prob = np.zeros((n, 8))
-        prob[:, M - 1] = 0.9
-        return np.full(n, M), np.full(n, 0.9), prob
 
 
 def test_short_minarets_are_pillars_per_instance_in_the_tree_stage():
@@ -103,11 +96,11 @@ def test_short_minarets_are_pillars_per_instance_in_the_tree_stage():
     params = TreeStageParams(max_depth=0, roof_min_height=None)
     for height, want in ((2.0, P), (25.0, M)):
         xyz = np.c_[0.3 * np.cos(t), 0.3 * np.sin(t), rng.uniform(0, height, 3000)]
-        values, cols, n_inst = _group_tree(xyz, 0, params, _AlwaysMinaret(), None, 0)
+        values, cols, n_inst = _group_tree(xyz, 0, params, _Always(M), None, 0)
         assert set(values["class"].tolist()) == {want}
         assert cols["class_id"] == [want]
         assert n_inst == 1
     off = TreeStageParams(max_depth=0, roof_min_height=None, pillar_max_height=None)
     values, _, _ = _group_tree(np.c_[0.3 * np.cos(t), 0.3 * np.sin(t), rng.uniform(0, 2.0, 3000)], 0, off,
-                               _AlwaysMinaret(), None, 0)
+                               _Always(M), None, 0)
     assert set(values["class"].tolist()) == {M}
