@@ -227,8 +227,8 @@ def _group_tree(pts: np.ndarray, s: int, params: TreeStageParams, clf: Any, grou
             cols[c] = node_inst.tolist()
         elif c == "class_id":
             cols[c] = node_class.tolist()
-        elif c in ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax"):
-            j = ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax").index(c)
+        elif c in _BOX:
+            j = _BOX.index(c)
             cols[c] = (res.nodes.bbox[:, j] + center[j % 3]).tolist()
         else:
             cols[c] = np.asarray(d[c]).tolist()

@@ -330,13 +330,11 @@ def storeys(xyz: npt.ArrayLike, *, params: SequenceParams | None = None,
     if banded is None or banded.n_children <= prop.n_children:
         return prop
     # A child between the two ends of one band is that band.
-    is_band = tuple(bool(np.isin(banded.cuts[k - 1], bands[:, 0]) and np.isin(banded.cuts[k], bands[:, 1])
-                         and np.flatnonzero(bands[:, 0] == banded.cuts[k - 1]).tolist()
-                         == np.flatnonzero(bands[:, 1] == banded.cuts[k]).tolist())
-                    for k in range(1, banded.n_children - 1))
+    ends = {(float(lo), float(hi)) for lo, hi in bands}
+    kept_bands = tuple(k for k in range(1, banded.n_children - 1)
+                       if (float(banded.cuts[k - 1]), float(banded.cuts[k])) in ends)
     return Proposal(sequence=seq, children=prop.children, cuts=prop.cuts, curve=curve,
-                    kept_children=banded.children, kept_cuts=banded.cuts,
-                    kept_bands=tuple(k + 1 for k, b in enumerate(is_band) if b))
+                    kept_children=banded.children, kept_cuts=banded.cuts, kept_bands=kept_bands)
 
 
 def _open_high(hist: Histogram) -> Histogram:
