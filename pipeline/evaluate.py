@@ -136,15 +136,20 @@ def primitive_groups(store: RunStore) -> tuple[np.ndarray, int]:
 
 
 def _classify_groups(store: RunStore, group_of: np.ndarray, n_groups: int, clf: Any, *, seed: int = 0,
-                     ground: np.ndarray | None = None, roof_min_height: float | None = None) -> np.ndarray:
+                     ground: np.ndarray | None = None, roof_min_height: float | None = None,
+                     sizes: dict[str, float | None] | None = None) -> np.ndarray:
     """HollowNet class of every group of global segments (index 0: class 0).
 
     With ``ground`` (the local ground level of every global segment, index 0 unused,
     store coordinates) and ``roof_min_height``, a group classed ground or roof is
     decided by its median height as the tree stage decides a leaf
     (``tree.ground.ground_or_roof``), so the baselines get the same correction.
+    ``sizes``: the bounds of ``tree.tall.size_rules`` (``pillar_max_height``,
+    ``other_max_base``, ``other_max_height``), applied to every group as the tree stage
+    applies them to every part (the base test needs ``ground``); None: HollowNet's class.
     """
     from tree.ground import ground_or_roof
+    from tree.tall import size_rules
 
     offsets = store.read_unit("coarse/csr", ["offsets"])["offsets"]
     scale = np.asarray(store.attrs["coords"]["scale"])
@@ -156,10 +161,16 @@ def _classify_groups(store: RunStore, group_of: np.ndarray, n_groups: int, clf: 
     ids: list[int] = []
     batch_z: list[np.ndarray] = []
     batch_ground: list[float] = []
+    batch_mean_z: list[float] = []
 
     def flush() -> None:
         if batch:
-            cls = np.asarray(clf.predict(batch).class_id, dtype=np.uint8)
+            ruled = clf
+            if sizes is not None:
+                # Each part is centred: its ground in its own coordinates.
+                g = None if ground is None else np.array(batch_ground) - np.array(batch_mean_z)
+                ruled = size_rules(clf, ground=g, **sizes)
+            cls = np.asarray(ruled.predict(batch).class_id, dtype=np.uint8)
             if ground is not None and roof_min_height is not None:
                 for j in range(len(ids)):
                     z = batch_z[j]
@@ -171,6 +182,7 @@ def _classify_groups(store: RunStore, group_of: np.ndarray, n_groups: int, clf: 
             ids.clear()
             batch_z.clear()
             batch_ground.clear()
+            batch_mean_z.clear()
 
     for gid in range(1, n_groups + 1):
         segs = order[bounds[gid]:bounds[gid + 1]]
@@ -179,7 +191,9 @@ def _classify_groups(store: RunStore, group_of: np.ndarray, n_groups: int, clf: 
         if len(xyz) > MAX_CLASSIFY_POINTS:
             xyz = xyz[np.sort(rng.choice(len(xyz), MAX_CLASSIFY_POINTS, replace=False))]
         pts = xyz.astype(np.float64) * scale
-        batch.append(pts - pts.mean(axis=0) if len(pts) else pts)
+        mean = pts.mean(axis=0) if len(pts) else np.zeros(3)
+        batch.append(pts - mean)
+        batch_mean_z.append(float(mean[2]))
         ids.append(gid)
         batch_z.append(pts[:, 2])
         batch_ground.append(float(ground[segs].min()) if ground is not None and len(segs) else 0.0)
@@ -228,21 +242,27 @@ def evaluate_store(
     group_of, n_groups = primitive_groups(store)
     n_seg = len(group_of) - 1
     clf = Classifier.get((attrs.get("workflow", {}).get("tree") or {}).get("weights"))
-    pillar_max_height = (attrs.get("workflow", {}).get("tree") or {}).get("pillar_max_height")
-    if pillar_max_height is not None:  # the baselines get the tree stage's size rule too
-        from tree.tall import TallPillars
+    tree_cfg = attrs.get("workflow", {}).get("tree") or {}
+    # The baselines get the tree stage's size rules on every part too (tree/tall.py; a store
+    # written before a rule existed has no key for it and gets the rule's default), but for
+    # the base test of the clutter rule: it holds for whole objects, and a baseline's
+    # segment is a piece (a tree's crown, above its trunk, does not stand on the ground).
+    from pipeline.tree_stage import TreeStageParams
 
-        clf = TallPillars(clf, pillar_max_height)
+    defaults = TreeStageParams()
+    sizes = {k: tree_cfg.get(k, getattr(defaults, k)) for k in ("pillar_max_height", "other_max_height")}
+    sizes["other_max_base"] = None
     say(f"evaluate: {name}: classifying {n_seg:,} coarse segments and {n_groups:,} RANSAC primitives with HollowNet")
-    roof_min_height = (attrs.get("workflow", {}).get("tree") or {}).get("roof_min_height")
+    roof_min_height = tree_cfg.get("roof_min_height")
     ground = None
     if roof_min_height is not None:
         from pipeline.tree_stage import _ground_levels
 
         ground = np.r_[np.inf, _ground_levels(store)]  # index 0: no segment
     seg_class = _classify_groups(store, np.arange(n_seg + 1), n_seg, clf, ground=ground,
-                                 roof_min_height=roof_min_height)
-    prim_class = _classify_groups(store, group_of, n_groups, clf, ground=ground, roof_min_height=roof_min_height)
+                                 roof_min_height=roof_min_height, sizes=sizes)
+    prim_class = _classify_groups(store, group_of, n_groups, clf, ground=ground, roof_min_height=roof_min_height,
+                                  sizes=sizes)
     say(f"evaluate: {name}: scoring {n_total:,} points")
     acc = {m: LabelCounts.empty() for m in METHODS}
     rng = np.random.default_rng(0)

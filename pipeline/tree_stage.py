@@ -38,7 +38,7 @@ from pipeline.coarse import _read_table, _write_table
 from tiling.classes import PLANAR_CLASSES
 from tiling.errors import ConfigError, PipelineError
 from tiling.store import RunStore
-from tree.tall import TallPillars, short_minarets
+from tree.tall import short_minarets, size_rules
 
 __all__ = ["TreeStageParams", "tree_batch", "run_tree", "TreeReport", "plan_batches", "group_starts"]
 
@@ -52,8 +52,9 @@ DECISIONS = ("split-model", "energy")
 #: at a solid band that reaches the node's top (tree.sequences.occupancy_cut, open_high),
 #: and a tall pillar with a flat footprint stays a pillar (tree.tall.MIN_FOOTPRINT_RATIO);
 #: tree-v7: the band between two storeys is a wall child of its own (SequenceParams.bands);
-#: tree-v8: a minaret instance not taller than tree.pillar_max_height is a pillar.
-TREE_ALGORITHM = "tree-v8"
+#: tree-v8: a minaret instance not taller than tree.pillar_max_height is a pillar;
+#: tree-v9: clutter stands on the ground and is no taller than a tree (tree.tall.not_clutter).
+TREE_ALGORITHM = "tree-v9"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -88,6 +89,11 @@ class TreeStageParams:
     pillar_max_height : float or None
         A part HollowNet calls pillar that is taller than this many metres is a minaret
         (``tree/tall.py``: HollowNet cannot see size); None keeps HollowNet's class.
+    other_max_base, other_max_height : float or None
+        A part HollowNet calls other (clutter) whose lowest point is more than
+        ``other_max_base`` metres above the local ground, or that is taller than
+        ``other_max_height`` metres, takes its next most probable class
+        (``tree.tall.not_clutter``); None turns that test off.
     """
 
     max_depth: int = 3
@@ -99,6 +105,8 @@ class TreeStageParams:
     roof_min_height: float | None = 1.5
     max_group_points: int = 1_000_000
     pillar_max_height: float | None = 10.0
+    other_max_base: float | None = 2.0
+    other_max_height: float | None = 15.0
 
     def __post_init__(self) -> None:
         if not (isinstance(self.max_depth, int) and self.max_depth >= 0):
@@ -117,6 +125,12 @@ class TreeStageParams:
                 and self.pillar_max_height > 0):
             raise ConfigError(f"The 'pillar_max_height' parameter of tree must be a float in the range (0.0, inf) "
                               f"or None. Got {self.pillar_max_height!r} instead.")
+        for name in ("other_max_base", "other_max_height"):
+            v = getattr(self, name)
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
+                                  or v <= 0):
+                raise ConfigError(f"The '{name}' parameter of tree must be a float in the range (0.0, inf) "
+                                  f"or None. Got {v!r} instead.")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -125,7 +139,8 @@ class TreeStageParams:
     def from_workflow(cls, section: Any) -> TreeStageParams:
         return cls(max_depth=section.max_depth, decision=section.decision, threshold=section.threshold,
                    batch_points=section.batch_points, weights=section.weights, seed=section.seed, roof_min_height=section.roof_min_height,
-                   max_group_points=section.max_group_points, pillar_max_height=section.pillar_max_height)
+                   max_group_points=section.max_group_points, pillar_max_height=section.pillar_max_height,
+                   other_max_base=section.other_max_base, other_max_height=section.other_max_height)
 
 
 def plan_batches(offsets: np.ndarray, batch_points: int) -> list[tuple[int, int]]:
@@ -195,6 +210,10 @@ def _group_tree(pts: np.ndarray, s: int, params: TreeStageParams, clf: Any, grou
     from tree.split import load_split_model
 
     center = pts.mean(axis=0)
+    # The size rules of tree/tall.py, with the local ground in the tree's (centred) coordinates.
+    clf = size_rules(clf, pillar_max_height=params.pillar_max_height, other_max_base=params.other_max_base,
+                     other_max_height=params.other_max_height,
+                     ground=None if ground_level is None else ground_level - center[2])
     res = build_tree(pts - center, clf, max_depth=params.max_depth, threshold=params.threshold,
                      rng=np.random.SeedSequence([params.seed, s + 1]),
                      split=load_split_model() if params.decision == "split-model" else None)
@@ -280,7 +299,7 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
     ``starts``: the 0-based first segment of every element group in the batch (one tree
     per group, built on the points of all its segments); None = one tree per segment.
     ``ground``: the local ground level of each of these segments, in the store's
-    coordinates (``tree.ground.ground_levels``); used when ``roof_min_height`` is set
+    coordinates (``tree.ground.ground_levels``); used when ``roof_min_height`` or ``other_max_base`` is set
     (a group takes its segments' lowest). A batch of one group above ``max_group_points``
     is built on a sample of it (:func:`_sampled_group_tree`).
     """
@@ -293,12 +312,10 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
     lo, hi = int(offsets[segs[0]]), int(offsets[segs[1]])
     n = hi - lo
     clf = Classifier.get(params.weights, num_threads=_worker_threads())
-    if params.pillar_max_height is not None:
-        clf = TallPillars(clf, params.pillar_max_height)
     bounds = list(range(segs[0], segs[1] + 1)) if starts is None else [*starts, segs[1]]
 
     def ground_level(s: int, s_end: int) -> float | None:
-        if params.roof_min_height is None or ground is None:
+        if ground is None:
             return None
         return float(np.min(ground[s - segs[0]:s_end - segs[0]]))
 
@@ -377,7 +394,8 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any) -> TreeReport:
     batches = [(int(starts[g0]), int(starts[g1])) for g0, g1 in plan_batches(offsets[starts], params.batch_points)]
     done = {k: v for k, v in store.records(STAGE).items() if v.get("params_hash") == h}
     todo = [b for b in range(len(batches)) if str(b) not in done]
-    ground = _ground_levels(store) if todo and params.roof_min_height is not None else None
+    ground = _ground_levels(store) if todo and (params.roof_min_height is not None
+                                                or params.other_max_base is not None) else None
 
     def starts_in(b: int) -> list[int]:
         lo, hi = batches[b]

@@ -156,6 +156,11 @@ class TreeSection(_Section):
     pillar_max_height: Annotated[float, Field(gt=0)] | None = Field(
         10.0, description="a part HollowNet calls pillar that is taller than this (m) is a minaret unless its footprint is flat, and a minaret instance not taller than this is a pillar (HollowNet cannot see size; its training pillars are 2.5-8 m, its minarets 12-40 m); null = HollowNet's class as it is")
 
+    other_max_base: Annotated[float, Field(gt=0)] | None = Field(
+        2.0, description="a part HollowNet calls other (clutter) whose lowest point is more than this (m) above the local ground takes its next most probable class (clutter stands on the ground; a dome on its drum looks like a bush to HollowNet); null = no such test")
+    other_max_height: Annotated[float, Field(gt=0)] | None = Field(
+        15.0, description="a part HollowNet calls other (clutter) taller than this (m) takes its next most probable class (its training clutter is at most 12 m tall: trees); null = no such test")
+
     @field_validator("max_group_points")
     @classmethod
     def _sample_not_tiny(cls, v: int) -> int:
