@@ -145,7 +145,7 @@ def _classify_groups(store: RunStore, group_of: np.ndarray, n_groups: int, clf: 
     decided by its median height as the tree stage decides a leaf
     (``tree.ground.ground_or_roof``), so the baselines get the same correction.
     ``sizes``: the bounds of ``tree.tall.size_rules`` (``pillar_max_height``,
-    ``other_max_base``, ``other_max_height``), applied to every group as the tree stage
+    ``other_max_base``, ``other_max_size``), applied to every group as the tree stage
     applies them to every part (the base test needs ``ground``); None: HollowNet's class.
     """
     from tree.ground import ground_or_roof
@@ -250,7 +250,7 @@ def evaluate_store(
     from pipeline.tree_stage import TreeStageParams
 
     defaults = TreeStageParams()
-    sizes = {k: tree_cfg.get(k, getattr(defaults, k)) for k in ("pillar_max_height", "other_max_height")}
+    sizes = {k: tree_cfg.get(k, getattr(defaults, k)) for k in ("pillar_max_height", "other_max_size")}
     sizes["other_max_base"] = None
     say(f"evaluate: {name}: classifying {n_seg:,} coarse segments and {n_groups:,} RANSAC primitives with HollowNet")
     roof_min_height = tree_cfg.get("roof_min_height")

@@ -53,8 +53,10 @@ DECISIONS = ("split-model", "energy")
 #: and a tall pillar with a flat footprint stays a pillar (tree.tall.MIN_FOOTPRINT_RATIO);
 #: tree-v7: the band between two storeys is a wall child of its own (SequenceParams.bands);
 #: tree-v8: a minaret instance not taller than tree.pillar_max_height is a pillar;
-#: tree-v9: clutter stands on the ground and is no taller than a tree (tree.tall.not_clutter).
-TREE_ALGORITHM = "tree-v9"
+#: tree-v9: clutter stands on the ground and is no taller than a tree (tree.tall.not_clutter);
+#: tree-v10: a node is split at its gaps first (tree.sequences.gaps), and clutter is no
+#: larger than a tree along x and y too (tree.other_max_size for other_max_height).
+TREE_ALGORITHM = "tree-v10"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -89,10 +91,10 @@ class TreeStageParams:
     pillar_max_height : float or None
         A part HollowNet calls pillar that is taller than this many metres is a minaret
         (``tree/tall.py``: HollowNet cannot see size); None keeps HollowNet's class.
-    other_max_base, other_max_height : float or None
+    other_max_base, other_max_size : float or None
         A part HollowNet calls other (clutter) whose lowest point is more than
-        ``other_max_base`` metres above the local ground, or that is taller than
-        ``other_max_height`` metres, takes its next most probable class
+        ``other_max_base`` metres above the local ground, or that is larger than
+        ``other_max_size`` metres along x, y or z, takes its next most probable class
         (``tree.tall.not_clutter``); None turns that test off.
     """
 
@@ -106,7 +108,7 @@ class TreeStageParams:
     max_group_points: int = 1_000_000
     pillar_max_height: float | None = 10.0
     other_max_base: float | None = 2.0
-    other_max_height: float | None = 15.0
+    other_max_size: float | None = 15.0
 
     def __post_init__(self) -> None:
         if not (isinstance(self.max_depth, int) and self.max_depth >= 0):
@@ -125,7 +127,7 @@ class TreeStageParams:
                 and self.pillar_max_height > 0):
             raise ConfigError(f"The 'pillar_max_height' parameter of tree must be a float in the range (0.0, inf) "
                               f"or None. Got {self.pillar_max_height!r} instead.")
-        for name in ("other_max_base", "other_max_height"):
+        for name in ("other_max_base", "other_max_size"):
             v = getattr(self, name)
             if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
                                   or v <= 0):
@@ -140,7 +142,7 @@ class TreeStageParams:
         return cls(max_depth=section.max_depth, decision=section.decision, threshold=section.threshold,
                    batch_points=section.batch_points, weights=section.weights, seed=section.seed, roof_min_height=section.roof_min_height,
                    max_group_points=section.max_group_points, pillar_max_height=section.pillar_max_height,
-                   other_max_base=section.other_max_base, other_max_height=section.other_max_height)
+                   other_max_base=section.other_max_base, other_max_size=section.other_max_size)
 
 
 def plan_batches(offsets: np.ndarray, batch_points: int) -> list[tuple[int, int]]:
@@ -212,7 +214,7 @@ def _group_tree(pts: np.ndarray, s: int, params: TreeStageParams, clf: Any, grou
     center = pts.mean(axis=0)
     # The size rules of tree/tall.py, with the local ground in the tree's (centred) coordinates.
     clf = size_rules(clf, pillar_max_height=params.pillar_max_height, other_max_base=params.other_max_base,
-                     other_max_height=params.other_max_height,
+                     other_max_size=params.other_max_size,
                      ground=None if ground_level is None else ground_level - center[2])
     res = build_tree(pts - center, clf, max_depth=params.max_depth, threshold=params.threshold,
                      rng=np.random.SeedSequence([params.seed, s + 1]),

@@ -158,8 +158,8 @@ class TreeSection(_Section):
 
     other_max_base: Annotated[float, Field(gt=0)] | None = Field(
         2.0, description="a part HollowNet calls other (clutter) whose lowest point is more than this (m) above the local ground takes its next most probable class (clutter stands on the ground; a dome on its drum looks like a bush to HollowNet); null = no such test")
-    other_max_height: Annotated[float, Field(gt=0)] | None = Field(
-        15.0, description="a part HollowNet calls other (clutter) taller than this (m) takes its next most probable class (its training clutter is at most 12 m tall: trees); null = no such test")
+    other_max_size: Annotated[float, Field(gt=0)] | None = Field(
+        15.0, description="a part HollowNet calls other (clutter) larger than this (m) along x, y or z takes its next most probable class (its largest training clutter, trees, is at most 12 m tall and 11 m wide); null = no such test")
 
     @field_validator("max_group_points")
     @classmethod

@@ -224,3 +224,88 @@ def test_a_kept_storeys_split_makes_its_bands_wall_children(monkeypatch):
     assert res.nodes.score[kids[1]] == pytest.approx(0.1)
     assert calls[1] == [len(c) for c in judged]
     assert calls[2] == [len(c) for c in kept]
+
+
+def _bastion(rng, center, n=20000, r=6.0, height=27.0):
+    t = rng.uniform(0, 2 * np.pi, n)
+    return np.c_[center[0] + r * np.cos(t), center[1] + r * np.sin(t), rng.uniform(0, height, n)]
+
+
+def test_gaps_cut_parts_that_do_not_touch():
+    """Two bastions 19 m apart (a 7 m gap) joined by a few points of a curtain wall are cut
+    at the gap; one bastion, a gap under ``params.gap``, or stray points too few to be a
+    part are not."""
+    from tree.sequences import GAP_SEQUENCE, SequenceParams, gaps
+
+    rng = np.random.default_rng(0)
+    a, b = _bastion(rng, (0.0, 0.0)), _bastion(rng, (0.0, 19.0))
+    bridge = np.c_[rng.uniform(-0.5, 0.5, 40), rng.uniform(6.0, 13.0, 40), rng.uniform(19.0, 20.0, 40)]
+    pr = gaps(np.r_[a, bridge, b])
+    assert pr is not None
+    assert pr.sequence == GAP_SEQUENCE
+    assert pr.n_children == 2
+    sizes = sorted(len(c) for c in pr.children)
+    assert sizes[0] >= 20000
+    assert sum(sizes) == 40040
+    assert gaps(a) is None
+    near = _bastion(rng, (0.0, 13.5))  # 1.5 m between the two shells: under the 2 m default
+    assert gaps(np.r_[a, near]) is None
+    assert gaps(np.r_[a, near], params=SequenceParams(gap=1.0)) is not None
+    assert gaps(np.r_[a, b], params=SequenceParams(gap=0.0)) is None
+    stray = np.c_[np.zeros(5), np.full(5, 30.0), np.linspace(0, 20, 5)]
+    assert gaps(np.r_[a, stray]) is None
+
+
+class _Always:
+    def __init__(self, cls):
+        self.cls = cls
+
+    def predict(self, segments):
+        prob = np.zeros((len(segments), NUM_CLASSES - 1))
+        prob[:, self.cls - 1] = 1.0
+        return np.full(len(segments), self.cls), np.ones(len(segments)), prob
+
+
+class _ArchWholeMinaretParts:
+    """Calls a part with points on both sides of y = 9.5 arch, any other minaret."""
+
+    def predict(self, segments):
+        both = np.array([len(s) > 0 and s[:, 1].min() < 9.5 < s[:, 1].max() for s in segments])
+        cls = np.where(both, int(ClassId.ARCH), int(ClassId.MINARET))
+        prob = np.zeros((len(segments), NUM_CLASSES - 1))
+        prob[np.arange(len(segments)), cls - 1] = 1.0
+        return cls, np.ones(len(segments)), prob
+
+
+def test_the_tree_splits_the_root_at_its_gaps_first(monkeypatch):
+    """Only the root: inside the tree a gap is more often the opening between two piers
+    whose arch another cut took away."""
+    import tree.build as tb
+    from tree.sequences import GAP_SEQUENCE
+
+    calls = []
+
+    def gaps(pts, **kw):
+        calls.append(len(pts))
+        return tb_gaps(pts, **kw)
+
+    tb_gaps = tb.gaps
+    monkeypatch.setattr(tb, "gaps", gaps)
+    rng = np.random.default_rng(1)
+    xyz = np.r_[_bastion(rng, (0.0, 0.0)), _bastion(rng, (0.0, 19.0))]
+    r = build_tree(xyz, _ArchWholeMinaretParts(), rng=0)
+    assert calls == [len(xyz)]
+    kids = r.nodes.children(0)
+    assert len(kids) == 2
+    assert set(r.nodes.sequence[kids].tolist()) == {GAP_SEQUENCE}
+    assert np.isnan(r.nodes.xi[kids]).all()
+    assert set(r.class_id.tolist()) == {int(ClassId.MINARET)}
+    assert len(np.unique(r.instance)) == 2
+    assert len(np.unique(r.instance[:20000])) == 1
+    assert r.instance[0] != r.instance[-1]
+    # A whole called minaret too: the parts still are two instances (they do not touch).
+    r1 = build_tree(xyz, _Always(int(ClassId.MINARET)), rng=0)
+    assert r1.nodes.sequence[r1.nodes.children(0)].tolist() == [GAP_SEQUENCE] * 2
+    assert len(np.unique(r1.instance)) == 2
+    r0 = build_tree(xyz, _ArchWholeMinaretParts(), rng=0, max_depth=0)
+    assert len(r0.nodes) == 1

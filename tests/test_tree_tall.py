@@ -127,47 +127,50 @@ def test_not_clutter_moves_raised_or_tall_other_to_its_next_class():
     prob[4] = 0.0  # HollowNet could not classify it
     cls = [O, O, O, W, O]
     out = not_clutter(cls, prob, [0.5, 3.0, np.nan, 9.0, 9.0], [4.0, 4.0, 20.0, 4.0, 4.0], max_base=2.0,
-                      max_height=15.0)
+                      max_size=15.0)
     assert out.tolist() == [O, D, D, W, O]
     # A test set to None is off; an unknown base (NaN) never moves a part.
-    assert not_clutter(cls, prob, [3.0] * 5, [20.0] * 5, max_base=None, max_height=None).tolist() == cls
-    assert not_clutter(cls, prob, [np.nan] * 5, [4.0] * 5, max_base=2.0, max_height=None).tolist() == cls
+    assert not_clutter(cls, prob, [3.0] * 5, [20.0] * 5, max_base=None, max_size=None).tolist() == cls
+    assert not_clutter(cls, prob, [np.nan] * 5, [4.0] * 5, max_base=2.0, max_size=None).tolist() == cls
     with pytest.raises(ValueError, match="base"):
-        not_clutter(cls, prob, [0.0], [4.0] * 5, max_base=2.0, max_height=15.0)
+        not_clutter(cls, prob, [0.0], [4.0] * 5, max_base=2.0, max_size=15.0)
     with pytest.raises(ValueError, match="probabilities"):
-        not_clutter([O], np.zeros((1, 3)), [0.0], [1.0], max_base=2.0, max_height=15.0)
+        not_clutter([O], np.zeros((1, 3)), [0.0], [1.0], max_base=2.0, max_size=15.0)
 
 
 def test_not_clutter_wrapper_measures_each_part_from_the_ground():
-    """A bush on the ground stays other; the same shape on a roof (a dome on its drum) and
-    a 27 m part (a bastion seen from one side) do not. Scores stay HollowNet's."""
+    """A bush on the ground stays other; the same shape on a roof (a dome on its drum), a
+    27 m part (a bastion seen from one side) and a 20 m long one do not. Scores stay
+    HollowNet's."""
     from tree.tall import NotClutter
 
     rng = np.random.default_rng(4)
     bush = rng.uniform(0, 1, (400, 3)) * [3.0, 3.0, 2.5]
     raised = bush + [0, 0, 11.0]
     tall = rng.uniform(0, 1, (400, 3)) * [6.0, 12.0, 27.0]
-    clf = NotClutter(_Clutter(), ground=0.0, max_base=2.0, max_height=15.0)
+    clf = NotClutter(_Clutter(), ground=0.0, max_base=2.0, max_size=15.0)
     cls, score, _ = clf.predict([bush, raised, tall])
     assert cls.tolist() == [O, D, D]
+    wide = rng.uniform(0, 1, (400, 3)) * [4.0, 20.0, 3.0]  # 20 m long, on the ground: no clutter either
+    assert clf.predict([wide])[0].tolist() == [D]
     np.testing.assert_array_equal(score, 0.7)
     # One ground per part; no ground: only the height test.
     assert NotClutter(_Clutter(), ground=[0.0, 11.0, 0.0], max_base=2.0,
-                      max_height=15.0).predict([bush, raised, tall])[0].tolist() == [O, O, D]
+                      max_size=15.0).predict([bush, raised, tall])[0].tolist() == [O, O, D]
     assert NotClutter(_Clutter(), ground=None, max_base=2.0,
-                      max_height=15.0).predict([bush, raised, tall])[0].tolist() == [O, O, D]
+                      max_size=15.0).predict([bush, raised, tall])[0].tolist() == [O, O, D]
     with pytest.raises(ValueError, match="ground"):
-        NotClutter(_Clutter(), ground=[0.0, 1.0], max_base=2.0, max_height=None).predict([bush, raised, tall])
+        NotClutter(_Clutter(), ground=[0.0, 1.0], max_base=2.0, max_size=None).predict([bush, raised, tall])
     with pytest.raises(ValueError, match="max_base"):
-        NotClutter(_Clutter(), ground=0.0, max_base=0.0, max_height=None)
+        NotClutter(_Clutter(), ground=0.0, max_base=0.0, max_size=None)
 
 
 def test_size_rules_compose_and_turn_off():
     from tree.tall import NotClutter, size_rules
 
     base = _Clutter()
-    assert size_rules(base, pillar_max_height=None, other_max_base=None, other_max_height=None) is base
-    both = size_rules(base, pillar_max_height=10.0, other_max_base=2.0, other_max_height=15.0, ground=0.0)
+    assert size_rules(base, pillar_max_height=None, other_max_base=None, other_max_size=None) is base
+    both = size_rules(base, pillar_max_height=10.0, other_max_base=2.0, other_max_size=15.0, ground=0.0)
     assert isinstance(both, TallPillars)
     assert isinstance(both.classifier, NotClutter)
 
@@ -188,7 +191,7 @@ def test_the_tree_stage_reads_the_clutter_rule_from_its_params():
     values, cols, _ = _group_tree(xyz, 0, off, _Clutter(), 0.0, 0)
     assert cols["class_id"] == [O]
     assert TreeStageParams().other_max_base == 2.0
-    assert TreeStageParams().other_max_height == 15.0
+    assert TreeStageParams().other_max_size == 15.0
     for bad in (0.0, -1.0, float("inf"), True):
-        with pytest.raises(ConfigError, match="other_max_height"):
-            TreeStageParams(other_max_height=bad)
+        with pytest.raises(ConfigError, match="other_max_size"):
+            TreeStageParams(other_max_size=bad)

@@ -9,7 +9,9 @@ stack replaces the paper's recursion.
 
 Element instances (``../shared/METHOD.md``, "Classes"): the largest node whose class is an
 element class (arch, dome, minaret, pillar) and whose ancestors are not; every point below
-it takes its class and instance.
+it takes its class and instance. A split node counts as an element only when its children
+mostly share its class, and never when it was split at gaps (:func:`tree.sequences.gaps`:
+its parts do not touch).
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ import numpy.typing as npt
 from tiling.classes import ELEMENT_CLASSES, ClassId
 from tree.energy import Classifier, EnergyModel, energy_terms, load_energy_model
 from tree.operators import RngLike
-from tree.sequences import Proposal, SequenceParams, propose
+from tree.sequences import GAP_SEQUENCE, Proposal, SequenceParams, gaps, propose
 from tree.split import N_PROBS, SplitModel, split_features
 
 __all__ = ["NodeTable", "TreeResult", "build_tree"]
@@ -46,7 +48,8 @@ class NodeTable:
         -1 for the root.
     depth : ndarray of int64
     sequence : ndarray of int8
-        The sequence (1, 2, 3) whose split produced the node; 0 for the root.
+        The sequence (1, 2, 3) whose split produced the node; 0 for the root, 5
+        (``tree.sequences.GAP_SEQUENCE``) for a cut at gaps.
     terms : ndarray of float64, shape (n_nodes, 5)
         e1..e5 of the split that produced the node (NaN for the root).
     xi : ndarray of float64
@@ -223,12 +226,39 @@ def build_tree(
     leaf_of = np.zeros(n, dtype=np.int64)
     is_leaf = [True]
     stack: list[tuple[int, IntArray]] = [(0, np.arange(n, dtype=np.int64))]
+
+    def _add_children(node: int, idx: IntArray, children: Any, sequence: int, e: FloatArray, x: float,
+                      c_cls: IntArray, c_sc: FloatArray, c_pr: FloatArray) -> None:
+        """Make ``children`` (index arrays into ``idx``, the node's points) children of ``node``."""
+        is_leaf[node] = False
+        for j, child in enumerate(children):
+            cid = len(parent)
+            gidx = idx[child]
+            parent.append(node)
+            depth.append(depth[node] + 1)
+            seq.append(sequence)
+            terms.append(e)
+            xi.append(x)
+            cls.append(int(c_cls[j]))
+            score.append(float(c_sc[j]))
+            probs.append(c_pr[j])
+            npts.append(len(gidx))
+            bbox.append(_bbox(a[gidx]))
+            is_leaf.append(True)
+            leaf_of[gidx] = cid
+            stack.append((cid, gidx))
+
     while stack:
         node, idx = stack.pop()
         if depth[node] >= max_depth or len(idx) < max(params.min_points, 2):
             continue
         pts = a[idx]
         if _is_flat(pts, params):
+            continue
+        gap = gaps(pts, params=params) if depth[node] == 0 else None
+        if gap is not None:  # parts that do not touch: split, whatever the classifier says
+            c_cls, c_sc, c_pr = _classify(classifier, [pts[c] for c in gap.children])
+            _add_children(node, idx, gap.children, gap.sequence, np.full(5, np.nan), np.nan, c_cls, c_sc, c_pr)
             continue
         node_rng = np.random.default_rng(np.random.SeedSequence([base, node]))
         props = [(key, pr) for key, pr in propose(pts, params=params, rng=node_rng).items() if pr is not None]
@@ -266,23 +296,7 @@ def build_tree(
             for j in pr.kept_bands:  # solid across the wall's length: wall, whatever its look
                 c_cls[j] = _WALL
                 c_sc[j] = c_pr[j, _WALL - 1] if c_pr.shape[1] >= _WALL else c_sc[j]
-        is_leaf[node] = False
-        for j, child in enumerate(children):
-            cid = len(parent)
-            gidx = idx[child]
-            parent.append(node)
-            depth.append(depth[node] + 1)
-            seq.append(pr.sequence)
-            terms.append(e)
-            xi.append(x)
-            cls.append(int(c_cls[j]))
-            score.append(float(c_sc[j]))
-            probs.append(c_pr[j])
-            npts.append(len(gidx))
-            bbox.append(_bbox(a[gidx]))
-            is_leaf.append(True)
-            leaf_of[gidx] = cid
-            stack.append((cid, gidx))
+        _add_children(node, idx, children, pr.sequence, e, x, c_cls, c_sc, c_pr)
     m = len(parent)
     nodes = NodeTable(
         node_id=np.arange(m, dtype=np.int64), parent=np.asarray(parent, dtype=np.int64),
@@ -306,6 +320,9 @@ def _per_point(nodes: NodeTable, leaf_of: IntArray) -> TreeResult:
         if nodes.class_id[i] == nodes.class_id[par]:
             same[par] += int(nodes.n_points[i])
     element &= nodes.is_leaf | (2 * same >= nodes.n_points)
+    # Parts cut at gaps do not touch: they are different things whatever their classes.
+    gap_parent = nodes.parent[(nodes.sequence == GAP_SEQUENCE) & (nodes.parent >= 0)]
+    element[gap_parent] = False
     inst_nodes: list[int] = []
     for i in range(m):  # parents come before children (creation order)
         par = int(nodes.parent[i])

@@ -46,7 +46,8 @@ from tree.operators import (
     v2,
 )
 
-__all__ = ["SEQUENCES", "Proposal", "SequenceParams", "occupancy_cut", "propose", "s1", "s2", "s3", "storeys"]
+__all__ = ["GAP_SEQUENCE", "SEQUENCES", "Proposal", "SequenceParams", "gaps", "occupancy_cut", "propose", "s1", "s2",
+           "s3", "storeys"]
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
@@ -57,6 +58,11 @@ SEQUENCES: tuple[int, ...] = (1, 2, 3)
 #: How far (a share of its height) a solid band reaching the top of a node must stand
 #: above the occupancy below it to be a storey cut (:func:`occupancy_cut`).
 OPEN_HIGH_PROMINENCE = 0.25
+#: The node table's sequence id of a split at gaps (:func:`gaps`).
+GAP_SEQUENCE = 5
+#: A column of the wall's projection is empty, for :func:`gaps`, when it holds fewer
+#: occupied cells than this share of the node's full columns (their 90th percentile).
+GAP_LEVEL = 0.02
 #: Where a band ends (:func:`occupancy_cut` with ``bands``): the occupancy is this share
 #: of the way from the valley on that side to the band's top.
 BAND_LEVEL = 0.9
@@ -94,6 +100,10 @@ class SequenceParams:
     bands : bool
         A kept storeys split makes each solid band (the wall over a row of arches) a child
         of its own, cut at both its ends (:data:`BAND_LEVEL`), instead of halving it.
+    gap : float
+        A stretch at least this long (metres) along the node's wall with (almost) nothing
+        in it separates two parts that do not touch: :func:`tree.build.build_tree` splits
+        the root there before anything else (:func:`gaps`). 0 = never.
     """
 
     prominence: float = 0.05
@@ -107,6 +117,7 @@ class SequenceParams:
     cell: float = 0.1
     storeys: bool = True
     bands: bool = True
+    gap: float = 2.0
 
     def to_dict(self) -> dict[str, object]:
         return dict(self.__dict__)
@@ -408,6 +419,62 @@ def _cuts(hist: Histogram, prominence: float, open_high: bool,
     margin = 2.0 * float(hist.fine_edges[1] - hist.fine_edges[0])
     inside = np.isfinite(start) & np.isfinite(stop) & (start > lo + margin) & (stop < hi - margin)
     return cuts, np.column_stack([start, stop])[inside]
+
+
+def gaps(xyz: npt.ArrayLike, *, params: SequenceParams | None = None) -> Proposal | None:
+    """The node cut at its gaps: parts side by side that do not touch, such as two
+    bastions that the coarse stage joined through a few points of the curtain wall
+    between them.
+
+    Along the node's wall (``h``: the principal axis of its footprint) each column of
+    ``params.cell`` holds some occupied cells of the ``(t, z)`` projection; a column is
+    empty when it holds fewer than :data:`GAP_LEVEL` of the node's full columns (their
+    90th percentile), and a run of empty columns at least ``params.gap`` long is a gap,
+    cut at its middle. A cut that would leave a part under ``params.min_points`` points
+    or ``5 x params.min_child_fraction`` of the node is dropped. None when there is no
+    gap (or ``params.gap`` is 0 or ``params.cell`` is 0).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> a = rng.uniform(0, 1, (2000, 3)) * [4.0, 1.0, 10.0]
+    >>> pr = gaps(np.r_[a, a + [7.0, 0, 0]])
+    >>> pr.n_children, [len(c) for c in pr.children]
+    (2, [2000, 2000])
+    >>> gaps(a) is None
+    True
+    """
+    a = _as_xyz(xyz)
+    params = params or SequenceParams()
+    if params.gap <= 0 or params.cell <= 0 or len(a) < 2 * params.min_points:
+        return None
+    t, z = h(a).T
+    t0, z0 = float(t.min()), float(z.min())
+    kx = ((t - t0) * (1.0 / params.cell)).astype(np.int64)
+    kz = ((z - z0) * (1.0 / params.cell)).astype(np.int64)
+    _, first = np.unique(kx * (int(kz.max()) + 1) + kz, return_index=True)
+    occ = np.bincount(kx[first], minlength=int(kx.max()) + 1).astype(np.float64)
+    empty = occ < GAP_LEVEL * float(np.percentile(occ, 90))
+    # Runs of empty columns: starts and ends (exclusive), inside the node (both ends occupied).
+    d = np.diff(np.r_[0, empty.astype(np.int8), 0])
+    start, stop = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    inner = (start > 0) & (stop < len(occ)) & ((stop - start) * params.cell >= params.gap)
+    if not inner.any():
+        return None
+    cuts = t0 + 0.5 * (start[inner] + stop[inner]) * params.cell
+    min_n = max(params.min_points, int(np.ceil(5 * params.min_child_fraction * len(a))))
+    while len(cuts):
+        counts = np.bincount(np.searchsorted(cuts, t), minlength=len(cuts) + 1)
+        small = np.flatnonzero(counts < min_n)
+        if not len(small):
+            break
+        j = int(small[0])  # drop the cut on that part's side that bounds it
+        cuts = np.delete(cuts, min(j, len(cuts) - 1))
+    if not len(cuts):
+        return None
+    part = np.searchsorted(cuts, t)
+    children = tuple(np.flatnonzero(part == k).astype(np.int64) for k in range(len(cuts) + 1))
+    return Proposal(sequence=GAP_SEQUENCE, children=children, cuts=cuts, curve=None)
 
 
 def propose(xyz: npt.ArrayLike, *, params: SequenceParams | None = None,

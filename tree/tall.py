@@ -25,7 +25,8 @@ is what stands on the ground before a building (benches, cars, bicycles, crates,
 trees of 3-12 m in its training scenes), but seen without its size a dome on its drum
 looks like a bush and a bastion scanned from one side like a tree. A part classed other
 whose lowest point is more than ``tree.other_max_base`` (2 m) above the local ground
-(``tree/ground.py``), or that is taller than ``tree.other_max_height`` (15 m), takes
+(``tree/ground.py``), or that is larger than ``tree.other_max_size`` (15 m) along x, y or
+z, takes
 HollowNet's most probable class but other. :class:`NotClutter` applies it to every part
 the tree classifies, before the tall-pillar rule; the baselines of ``hollowtree
 evaluate`` get it too (it is a rule on one part's class, like the tall-pillar rule).
@@ -141,30 +142,30 @@ class TallPillars:
         return new, score, prob
 
 
-def not_clutter(class_id: npt.ArrayLike, probabilities: npt.ArrayLike, base: npt.ArrayLike, height: npt.ArrayLike,
-                *, max_base: float | None, max_height: float | None) -> npt.NDArray[np.uint8]:
+def not_clutter(class_id: npt.ArrayLike, probabilities: npt.ArrayLike, base: npt.ArrayLike, size: npt.ArrayLike,
+                *, max_base: float | None, max_size: float | None) -> npt.NDArray[np.uint8]:
     """``class_id`` with every part classed other that does not stand on the ground or is
-    too tall for clutter given its most probable class but other.
+    too large for clutter given its most probable class but other.
 
     ``probabilities``: one row per part over the classes but ``unclassified``, in id order
     (HollowNet's output, ``hollownet.model.OUTPUT_CLASSES``); ``base``: the height of the
     part's lowest point above the local ground (NaN: unknown, the base test is skipped);
-    ``height``: its extent in z. A part is not clutter when ``base > max_base`` or
-    ``height > max_height`` (None: that test is off). A part whose probabilities are all
+    ``size``: its largest extent along x, y or z. A part is not clutter when
+    ``base > max_base`` or ``size > max_size`` (None: that test is off). A part whose probabilities are all
     zero (HollowNet could not classify it) stays other.
 
     Examples
     --------
     >>> p = [[0, 0, 0, 0, 0.3, 0, 0, 0.7]] * 3
-    >>> not_clutter([8, 8, 8], p, [0.0, 11.0, 0.0], [5.0, 5.0, 27.0], max_base=2.0, max_height=15.0).tolist()
+    >>> not_clutter([8, 8, 8], p, [0.0, 11.0, 0.0], [5.0, 5.0, 27.0], max_base=2.0, max_size=15.0).tolist()
     [8, 5, 5]
     """
     c = np.asarray(class_id).astype(np.uint8, copy=True).reshape(-1)
     n = len(c)
     p = np.asarray(probabilities, dtype=np.float64).reshape(n, -1)
     b = np.asarray(base, dtype=np.float64).reshape(-1)
-    h = np.asarray(height, dtype=np.float64).reshape(-1)
-    for name, v in (("base", b), ("height", h)):
+    h = np.asarray(size, dtype=np.float64).reshape(-1)
+    for name, v in (("base", b), ("size", h)):
         if len(v) != n:
             raise ValueError(f"The '{name}' parameter of not_clutter must have one entry per class ({n}). "
                              f"Got {len(v)} instead.")
@@ -176,8 +177,8 @@ def not_clutter(class_id: npt.ArrayLike, probabilities: npt.ArrayLike, base: npt
     if max_base is not None:
         with np.errstate(invalid="ignore"):
             out |= b > max_base
-    if max_height is not None:
-        out |= h > max_height
+    if max_size is not None:
+        out |= h > max_size
     p = p.copy()
     p[:, other - 1] = -1.0
     best = np.argmax(p, axis=1)
@@ -188,48 +189,47 @@ def not_clutter(class_id: npt.ArrayLike, probabilities: npt.ArrayLike, base: npt
 
 class NotClutter:
     """A classifier (``tree.energy.Classifier``) whose parts classed other are given their
-    next most probable class when they do not stand on the ground or are too tall for
+    next most probable class when they do not stand on the ground or are too large for
     clutter (:func:`not_clutter`). ``ground``: the local ground's z in the coordinates
     of the parts passed to ``predict``, one value for all or one per part (None or NaN:
     unknown, only the height test applies).
     Only the class changes; the score and the probabilities stay HollowNet's."""
 
     def __init__(self, classifier: Any, *, ground: float | npt.ArrayLike | None, max_base: float | None,
-                 max_height: float | None) -> None:
-        for name, v in (("max_base", max_base), ("max_height", max_height)):
+                 max_size: float | None) -> None:
+        for name, v in (("max_base", max_base), ("max_size", max_size)):
             if v is not None and not (np.isfinite(v) and v > 0):
                 raise ValueError(f"The '{name}' parameter of NotClutter must be a float in the range (0.0, inf) "
                                  f"or None. Got {v!r} instead.")
         self.classifier = classifier
         self.ground = None if ground is None else np.asarray(ground, dtype=np.float64)
         self.max_base = max_base
-        self.max_height = max_height
+        self.max_size = max_size
 
     def predict(self, segments: Sequence[npt.NDArray[np.float64]]) -> Any:
         pred = self.classifier.predict(segments)
         cls, score, prob = pred
         lo = np.array([float(s[:, 2].min()) if len(s) else np.nan for s in segments])
-        hi = np.array([float(s[:, 2].max()) if len(s) else np.nan for s in segments])
+        size = np.array([float(np.ptp(s, axis=0).max()) if len(s) else 0.0 for s in segments])
         if self.ground is not None and self.ground.size not in (1, len(lo)):
             raise ValueError(f"The 'ground' parameter of NotClutter must be one value or one per part ({len(lo)}). "
                              f"Got {self.ground.size} instead.")
         base = lo - self.ground.reshape(-1) if self.ground is not None else np.full(len(lo), np.nan)
         with np.errstate(invalid="ignore"):
-            new = not_clutter(cls, prob, base, np.nan_to_num(hi - lo), max_base=self.max_base,
-                              max_height=self.max_height)
+            new = not_clutter(cls, prob, base, size, max_base=self.max_base, max_size=self.max_size)
         if dataclasses.is_dataclass(pred) and hasattr(pred, "class_id"):
             return dataclasses.replace(pred, class_id=new)
         return new, score, prob
 
 
 def size_rules(classifier: Any, *, pillar_max_height: float | None, other_max_base: float | None,
-               other_max_height: float | None, ground: float | npt.ArrayLike | None = None) -> Any:
+               other_max_size: float | None, ground: float | npt.ArrayLike | None = None) -> Any:
     """``classifier`` with the rules of this module that apply to every part: clutter
-    stands on the ground and is no taller than a tree (:class:`NotClutter`, ``ground`` as
+    stands on the ground and is no larger than a tree (:class:`NotClutter`, ``ground`` as
     there), then a tall pillar is a minaret (:class:`TallPillars`). A bound of None turns
     its rule off; with all three None the classifier is returned as it is."""
-    if other_max_base is not None or other_max_height is not None:
-        classifier = NotClutter(classifier, ground=ground, max_base=other_max_base, max_height=other_max_height)
+    if other_max_base is not None or other_max_size is not None:
+        classifier = NotClutter(classifier, ground=ground, max_base=other_max_base, max_size=other_max_size)
     if pillar_max_height is not None:
         classifier = TallPillars(classifier, pillar_max_height)
     return classifier
