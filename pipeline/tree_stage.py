@@ -56,7 +56,7 @@ DECISIONS = ("split-model", "energy")
 #: tree-v9: clutter stands on the ground and is no taller than a tree (tree.tall.not_clutter);
 #: tree-v10: a node is split at its gaps first (tree.sequences.gaps), and clutter is no
 #: larger than a tree along x and y too (tree.other_max_size for other_max_height).
-TREE_ALGORITHM = "tree-v10"
+TREE_ALGORITHM = "tree-v11"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -67,6 +67,9 @@ class TreeStageParams:
     ----------
     max_depth : int
         The paper's ``d``.
+    look_ahead : bool
+        A storeys split rejected by its own score is kept when one of its storeys would
+        split (``tree.build.build_tree(look_ahead=)``).
     decision : str
         ``"split-model"`` (the learned split model, ``tree/data/split-v1.json``) or
         ``"energy"`` (the paper's ``xi = w . e``, ``tree/data/energy-v1.json``).
@@ -99,6 +102,7 @@ class TreeStageParams:
     """
 
     max_depth: int = 3
+    look_ahead: bool = True
     decision: str = "split-model"
     threshold: float | None = None
     batch_points: int = 200_000
@@ -113,6 +117,8 @@ class TreeStageParams:
     def __post_init__(self) -> None:
         if not (isinstance(self.max_depth, int) and self.max_depth >= 0):
             raise ConfigError(f"The 'max_depth' parameter of tree must be an int >= 0. Got {self.max_depth!r} instead.")
+        if not isinstance(self.look_ahead, bool):
+            raise ConfigError(f"The 'look_ahead' parameter of tree must be a bool. Got {self.look_ahead!r} instead.")
         if self.decision not in DECISIONS:
             raise ConfigError(f"The 'decision' parameter of tree must be one of {list(DECISIONS)}. "
                               f"Got {self.decision!r} instead.")
@@ -139,7 +145,7 @@ class TreeStageParams:
 
     @classmethod
     def from_workflow(cls, section: Any) -> TreeStageParams:
-        return cls(max_depth=section.max_depth, decision=section.decision, threshold=section.threshold,
+        return cls(max_depth=section.max_depth, look_ahead=section.look_ahead, decision=section.decision, threshold=section.threshold,
                    batch_points=section.batch_points, weights=section.weights, seed=section.seed, roof_min_height=section.roof_min_height,
                    max_group_points=section.max_group_points, pillar_max_height=section.pillar_max_height,
                    other_max_base=section.other_max_base, other_max_size=section.other_max_size)
@@ -217,6 +223,7 @@ def _group_tree(pts: np.ndarray, s: int, params: TreeStageParams, clf: Any, grou
                      other_max_size=params.other_max_size,
                      ground=None if ground_level is None else ground_level - center[2])
     res = build_tree(pts - center, clf, max_depth=params.max_depth, threshold=params.threshold,
+                     look_ahead=params.look_ahead,
                      rng=np.random.SeedSequence([params.seed, s + 1]),
                      split=load_split_model() if params.decision == "split-model" else None)
     if params.roof_min_height is not None and ground_level is not None:

@@ -142,6 +142,8 @@ class TreeSection(_Section):
 
     enabled: bool = Field(True, description="run the tree + HollowNet stage")
     max_depth: Annotated[int, Field(ge=0)] = Field(3, description="maximum depth d of Algorithm 1")
+    look_ahead: bool = Field(
+        True, description="a storeys split that its own score rejects is kept when one of its storeys would split (into bays): a storey cut is judged by what it leads to")
     decision: Literal["split-model", "energy"] = Field(
         "split-model", description="how a node's best proposal is chosen and kept: the learned split model (tree/data/split-v1.json) or the paper's energy xi = w . e (tree/data/energy-v1.json)")
     threshold: float | None = Field(None, description="a split is kept when its score (the split model's probability, or xi) >= this; null = the model's own")

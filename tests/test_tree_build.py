@@ -309,3 +309,94 @@ def test_the_tree_splits_the_root_at_its_gaps_first(monkeypatch):
     assert len(np.unique(r1.instance)) == 2
     r0 = build_tree(xyz, _ArchWholeMinaretParts(), rng=0, max_depth=0)
     assert len(r0.nodes) == 1
+
+
+class _ByProposal:
+    """A stand-in split model: probability 0.9 for an S2 proposal, 0.1 for any other."""
+
+    threshold = 0.5
+
+    def __init__(self):
+        from tree.split import FEATURE_NAMES
+
+        self._s2 = FEATURE_NAMES.index("seq_s2")
+        self.calls = 0
+
+    def probability(self, features):
+        self.calls += 1
+        return np.where(np.asarray(features)[:, self._s2] > 0, 0.9, 0.1)
+
+
+def test_a_storeys_split_is_kept_when_a_storey_splits(monkeypatch):
+    """A wall's storey cut leaves two walls (the split model rejects it, as the S1 cut that
+    ties with it), but the storey below splits into bays: the storey cut is judged by that
+    look-ahead, not by its own score."""
+    import tree.build as tb
+    from tree.sequences import Proposal
+
+    rng = np.random.default_rng(0)
+    xyz = np.c_[rng.uniform(0, 12, 4000), np.zeros(4000), rng.uniform(0, 10, 4000)]
+    n = len(xyz)
+    only_storeys = {"on": False}
+
+    def proposals(pts, **kw):
+        if len(pts) == n:  # the root: its storeys
+            lo, hi = np.flatnonzero(pts[:, 2] < 6.0), np.flatnonzero(pts[:, 2] >= 6.0)
+            halves = (np.flatnonzero(pts[:, 0] < 6.0), np.flatnonzero(pts[:, 0] >= 6.0))
+            return {1: Proposal(sequence=1, children=halves, cuts=np.array([6.0])), 2: None, 3: None,
+                    4: Proposal(sequence=2, children=(lo, hi), cuts=np.array([6.0]))}
+        if np.ptp(pts[:, 0]) < 6.0:  # a bay
+            return {1: None, 2: None, 3: None, 4: None}
+        bays = tuple(np.flatnonzero((pts[:, 0] >= a) & (pts[:, 0] < a + 4.0)) for a in (0.0, 4.0, 8.0))
+        bays_prop = Proposal(sequence=2, children=bays, cuts=np.array([4.0, 8.0]))
+        return {1: None, 2: None, 3: None, 4: bays_prop} if only_storeys["on"] else {2: bays_prop}
+
+    monkeypatch.setattr(tb, "propose", proposals)
+    wall = _Always(int(ClassId.WALL))
+    split = _ByProposal()
+    r = build_tree(xyz, wall, split=split, rng=0)
+    kids = r.nodes.children(0)
+    assert len(kids) == 2
+    assert r.nodes.sequence[kids].tolist() == [2, 2]
+    assert sorted(r.nodes.bbox[kids, 2].round().tolist()) == [0.0, 6.0]  # cut along z: the storeys
+    assert r.nodes.xi[kids].tolist() == pytest.approx([0.1, 0.1])  # the storeys' own score
+    assert sorted(len(r.nodes.children(k)) for k in kids) == [3, 3]
+    assert len(r.nodes) == 1 + 2 + 6
+    # Off, at depth 1, or when the storey's best is itself a storey cut: no look-ahead.
+    assert len(build_tree(xyz, wall, split=_ByProposal(), rng=0, look_ahead=False).nodes) == 1
+    assert len(build_tree(xyz, wall, split=_ByProposal(), rng=0, max_depth=1).nodes) == 1
+    assert len(build_tree(xyz, _Always(int(ClassId.MINARET)), split=_ByProposal(), rng=0).nodes) == 1  # a wall's cut only
+    with monkeypatch.context() as m:  # no storey with openings (every storey solid): no look-ahead
+        m.setattr(tb, "OPEN_STOREY", 0.0)
+        assert len(build_tree(xyz, wall, split=_ByProposal(), rng=0).nodes) == 1
+    only_storeys["on"] = True
+    assert len(build_tree(xyz, wall, split=_ByProposal(), rng=0).nodes) == 1
+
+
+def test_the_tree_stage_passes_look_ahead_from_the_workflow(monkeypatch):
+    from pathlib import Path
+
+    import tree.build as tb
+    from pipeline.tree_stage import TreeStageParams, _group_tree
+    from pipeline.workflow import load_workflow
+    from tiling.errors import ConfigError
+
+    local = Path(__file__).resolve().parent.parent / "workflows" / "local.yaml"
+    assert TreeStageParams.from_workflow(load_workflow(local).tree).look_ahead is True
+    off = TreeStageParams.from_workflow(load_workflow(local, ["tree.look_ahead=false"]).tree)
+    assert off.look_ahead is False
+    with pytest.raises(ConfigError, match="look_ahead"):
+        TreeStageParams(look_ahead="yes")
+    seen = []
+    real = tb.build_tree
+
+    def spy(*a, **kw):
+        seen.append(kw["look_ahead"])
+        return real(*a, **kw)
+
+    monkeypatch.setattr(tb, "build_tree", spy)
+    xyz = np.random.default_rng(0).uniform(0, 1, (500, 3))
+    _group_tree(xyz, 0, TreeStageParams(max_depth=0, roof_min_height=None, look_ahead=False),
+                _Always(int(ClassId.WALL)), None, 0)
+    _group_tree(xyz, 0, TreeStageParams(max_depth=0, roof_min_height=None), _Always(int(ClassId.WALL)), None, 0)
+    assert seen == [False, True]

@@ -5,7 +5,8 @@ classifier scores every proposal's children; each proposal gets ``xi = w . e``
 (:mod:`tree.energy`) or, with a split model (:mod:`tree.split`, the pipeline's default),
 the model's probability that it is right; the best is kept if that score reaches the
 threshold and the recursion goes on in its children down to ``max_depth``. An explicit
-stack replaces the paper's recursion.
+stack replaces the paper's recursion. A storeys cut is judged one level further (its
+storeys' own proposals: ``look_ahead``).
 
 Element instances (``../shared/METHOD.md``, "Classes"): the largest node whose class is an
 element class (arch, dome, minaret, pillar) and whose ancestors are not; every point below
@@ -24,13 +25,19 @@ import numpy.typing as npt
 
 from tiling.classes import ELEMENT_CLASSES, ClassId
 from tree.energy import Classifier, EnergyModel, energy_terms, load_energy_model
-from tree.operators import RngLike
+from tree.operators import RngLike, h
 from tree.sequences import GAP_SEQUENCE, Proposal, SequenceParams, gaps, propose
 from tree.split import N_PROBS, SplitModel, split_features
 
 __all__ = ["NodeTable", "TreeResult", "build_tree"]
 
 _WALL = int(ClassId.WALL)
+#: ``propose``'s keys of the storeys and of the cuts into bays (S2, S3).
+_STOREYS = 4
+_BAYS = (2, 3)
+#: A storey is looked into (``build_tree(look_ahead=)``) when under this share of its wall
+#: projection's cells is occupied (:func:`_solid_share`): it has a row of openings.
+OPEN_STOREY = 0.8
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
@@ -150,6 +157,30 @@ def _is_flat(pts: FloatArray, params: SequenceParams) -> bool:
     return bool(z_hi - z_lo < max(params.flat_height, params.flat_ratio * horizontal))
 
 
+def _solid_share(pts: FloatArray, params: SequenceParams) -> float:
+    """The share of occupied cells in the bounding box of a node's wall projection (``h``:
+    along its footprint's principal axis, and height): about 0.6 for a storey of arched
+    bays, above 0.85 for a plain wall seen from one side. The cells are ``params.cell``
+    wide, or twice the mean point spacing in that box where that is larger (a sparse
+    plain wall is still solid).
+
+    >>> rng = np.random.default_rng(0)
+    >>> wall = np.c_[rng.uniform(0, 10, 40000), np.zeros(40000), rng.uniform(0, 5, 40000)]
+    >>> bays = wall[(wall[:, 0] % 2.5 < 0.8) | (wall[:, 2] > 4.0)]
+    >>> round(_solid_share(wall, SequenceParams()), 2), round(_solid_share(bays, SequenceParams()), 2)
+    (1.0, 0.49)
+    >>> round(_solid_share(wall[:500], SequenceParams()), 2)  # sparse: 0.63 m cells
+    0.98
+    """
+    tz = h(pts)
+    ext = np.ptp(tz, axis=0)
+    # Cells of twice the mean point spacing at least, so a sparse plain wall fills them too.
+    cell = max(params.cell if params.cell > 0 else 0.1, 2.0 * float(np.sqrt(ext[0] * ext[1] / max(len(pts), 1))))
+    k = np.floor((tz - tz.min(axis=0)) * (1.0 / cell)).astype(np.int64)
+    n = k.max(axis=0) + 1
+    return len(np.unique(k[:, 0] * n[1] + k[:, 1])) / float(n[0] * n[1])
+
+
 def build_tree(
     xyz: npt.ArrayLike,
     classifier: Classifier,
@@ -160,6 +191,7 @@ def build_tree(
     params: SequenceParams | None = None,
     rng: RngLike = None,
     split: SplitModel | None = None,
+    look_ahead: bool = True,
 ) -> TreeResult:
     """Build the hierarchical tree of one segment (Algorithm 1).
 
@@ -185,6 +217,16 @@ def build_tree(
         proposal of highest probability is kept when it reaches the threshold. The
         classifier's probability rows must then be HollowNet's (8 classes). The energy's
         terms are still computed and recorded.
+    look_ahead : bool
+        When no proposal of a node classed wall, above ``max_depth - 1``, reaches the
+        threshold and one of them is a storeys cut, each storey (cut at the bands' middles,
+        as the proposal was scored) with a row of openings (under :data:`OPEN_STOREY` of
+        its wall projection occupied) gets its cuts into bays (S2, S3) scored; the storeys
+        cut is kept when one of those reaches the threshold.
+        A storey cut rarely changes a class (a wall over a row of arches leaves a wall and
+        a band of bays that HollowNet calls wall); what it is for is the bays below it.
+        The node table's ``xi`` stays the cut's own score, so a split child whose ``xi``
+        is under the threshold was kept by this look-ahead.
 
     Returns
     -------
@@ -248,6 +290,41 @@ def build_tree(
             leaf_of[gidx] = cid
             stack.append((cid, gidx))
 
+    thr_split = split.threshold if split is not None and threshold is None else thr
+
+    def _scored(pts: FloatArray, node_depth: int, node_cls: int, node_probs: FloatArray,
+                node_rng: np.random.Generator, keys: tuple[int, ...] = (1, 2, 3, _STOREYS),
+                ) -> list[tuple[float, int, Any]]:
+        """The node's proposals of ``keys``, each ``(score, key, (proposal, e, classes, scores, probs))``."""
+        props = [(key, pr) for key, pr in propose(pts, params=params, rng=node_rng).items()
+                 if pr is not None and key in keys]
+        if not props:
+            return []
+        parts = [pts[c] for _, pr in props for c in pr.children]
+        all_cls, all_sc, all_pr = _classify(classifier, parts)
+        cand: list[tuple[Proposal, FloatArray, IntArray, FloatArray, FloatArray]] = []
+        feats: list[FloatArray] = []
+        k = 0
+        extent = np.ptp(pts, axis=0) if split is not None else None
+        for key, pr in props:
+            s = pr.n_children
+            c_cls, c_sc, c_pr = all_cls[k:k + s], all_sc[k:k + s], all_pr[k:k + s]
+            k += s
+            sizes = [len(c) for c in pr.children]
+            e = energy_terms(sizes, n_min=model.n_min, prior=prior,
+                             parent_class=node_cls, sequence=pr.sequence, scores=c_sc)
+            cand.append((pr, e, c_cls, c_sc, c_pr))
+            if split is not None:
+                feats.append(split_features(n_parent=len(pts), extent=extent, depth=node_depth, key=key,
+                                            parent_class=node_cls, parent_probs=node_probs, child_sizes=sizes,
+                                            child_classes=c_cls, child_probs=c_pr, cuts=pr.cuts))
+        # One call of the split model for all proposals of the node (its trees are walked per call).
+        scores = split.probability(np.vstack(feats)) if split is not None else [model.xi(c[1]) for c in cand]
+        return [(float(x), key, c) for x, (key, _), c in zip(scores, props, cand, strict=True)]
+
+    def _best(scored: list[tuple[float, int, Any]]) -> tuple[float, int, Any]:
+        return scored[int(np.argmax([x for x, _, _ in scored]))]  # the first of equal scores, as before
+
     while stack:
         node, idx = stack.pop()
         if depth[node] >= max_depth or len(idx) < max(params.min_points, 2):
@@ -261,33 +338,27 @@ def build_tree(
             _add_children(node, idx, gap.children, gap.sequence, np.full(5, np.nan), np.nan, c_cls, c_sc, c_pr)
             continue
         node_rng = np.random.default_rng(np.random.SeedSequence([base, node]))
-        props = [(key, pr) for key, pr in propose(pts, params=params, rng=node_rng).items() if pr is not None]
-        if not props:
+        scored = _scored(pts, depth[node], cls[node], probs[node], node_rng)
+        if not scored:
             continue
-        parts = [pts[c] for _, pr in props for c in pr.children]
-        all_cls, all_sc, all_pr = _classify(classifier, parts)
-        cand: list[tuple[Proposal, FloatArray, IntArray, FloatArray, FloatArray]] = []
-        feats: list[FloatArray] = []
-        k = 0
-        extent = np.ptp(pts, axis=0) if split is not None else None
-        for key, pr in props:
-            s = pr.n_children
-            c_cls, c_sc, c_pr = all_cls[k:k + s], all_sc[k:k + s], all_pr[k:k + s]
-            k += s
-            sizes = [len(c) for c in pr.children]
-            e = energy_terms(sizes, n_min=model.n_min, prior=prior,
-                             parent_class=cls[node], sequence=pr.sequence, scores=c_sc)
-            cand.append((pr, e, c_cls, c_sc, c_pr))
-            if split is not None:
-                feats.append(split_features(n_parent=len(idx), extent=extent, depth=depth[node], key=key,
-                                            parent_class=cls[node], parent_probs=probs[node], child_sizes=sizes,
-                                            child_classes=c_cls, child_probs=c_pr, cuts=pr.cuts))
-        # One call of the split model for all proposals of the node (its trees are walked per call).
-        scores = split.probability(np.vstack(feats)) if split is not None else [model.xi(c[1]) for c in cand]
-        j_best = int(np.argmax(scores))  # the first of equal scores, as before
-        x = float(scores[j_best])
-        pr, e, c_cls, c_sc, c_pr = cand[j_best]
-        if not x >= (split.threshold if split is not None and threshold is None else thr):
+        x, key, (pr, e, c_cls, c_sc, c_pr) = _best(scored)
+        keep = x >= thr_split
+        storey = [t for t in scored if t[1] == _STOREYS]
+        if not keep and storey and look_ahead and cls[node] == _WALL and depth[node] + 1 < max_depth:
+            # A wall's storey cut is judged by what its storeys split into (the bays): the
+            # storeys as the proposal was scored (cut at the bands' middles), their cuts into bays.
+            st, _, k_cls, _, k_pr = storey[0][2]
+            for j, child in enumerate(st.children):
+                if len(child) < max(params.min_points, 2) or _is_flat(pts[child], params) \
+                        or _solid_share(pts[child], params) >= OPEN_STOREY:
+                    continue
+                k_rng = np.random.default_rng(np.random.SeedSequence([base, node, j, _STOREYS]))
+                inner = _scored(pts[child], depth[node] + 1, int(k_cls[j]), k_pr[j], k_rng, keys=_BAYS)
+                if inner and _best(inner)[0] >= thr_split:
+                    keep = True
+                    x, key, (pr, e, c_cls, c_sc, c_pr) = storey[0]
+                    break
+        if not keep:
             continue
         children = pr.children
         if pr.kept_children is not None:  # the storeys' bands, each a child (tree/sequences.py)
