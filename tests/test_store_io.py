@@ -73,8 +73,8 @@ def test_unit_writer_round_trip(store, n_rows, known):
 
 def test_unit_writer_refuses_more_rows_than_announced(store):
     w = store.unit_writer("tiles/0", n_rows=5)
-    with pytest.raises(StoreError):
-        w.append({"a": np.zeros(6, np.int32)})
+    w.append({"a": np.zeros(6, np.int32)})  # held back (under one chunk): checked when written
+    with pytest.raises(StoreError, match="more than the 5 rows announced"):
         w.close({})
 
 

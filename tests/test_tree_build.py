@@ -335,8 +335,10 @@ def test_a_storeys_split_is_kept_when_a_storey_splits(monkeypatch):
     from tree.sequences import Proposal
 
     rng = np.random.default_rng(0)
-    xyz = np.c_[rng.uniform(0, 12, 4000), np.zeros(4000), rng.uniform(0, 10, 4000)]
+    xyz = np.c_[rng.uniform(0, 12, 20000), np.zeros(20000), rng.uniform(0, 10, 20000)]
+    xyz = xyz[~((xyz[:, 2] < 5.0) & (np.abs(xyz[:, 0] % 4.0 - 2.0) < 1.0))]  # three 2 x 5 m openings
     n = len(xyz)
+    assert tb._solid_share(xyz[xyz[:, 2] < 6.0], tb.SequenceParams()) < tb.OPEN_STOREY
     only_storeys = {"on": False}
 
     def proposals(pts, **kw):

@@ -106,7 +106,7 @@ def test_short_minarets_are_pillars_per_instance_in_the_tree_stage():
     assert set(values["class"].tolist()) == {M}
 
 
-O, D = int(ClassId.OTHER), int(ClassId.DOME)
+OT, D = int(ClassId.OTHER), int(ClassId.DOME)
 
 
 class _Clutter:
@@ -115,27 +115,27 @@ class _Clutter:
     def predict(self, segments):
         n = len(segments)
         prob = np.zeros((n, 8))
-        prob[:, O - 1], prob[:, D - 1] = 0.7, 0.3
-        return np.full(n, O), np.full(n, 0.7), prob
+        prob[:, OT - 1], prob[:, D - 1] = 0.7, 0.3
+        return np.full(n, OT), np.full(n, 0.7), prob
 
 
 def test_not_clutter_moves_raised_or_tall_other_to_its_next_class():
     from tree.tall import not_clutter
 
     prob = np.zeros((5, 8))
-    prob[:, O - 1], prob[:, D - 1] = 0.7, 0.3
+    prob[:, OT - 1], prob[:, D - 1] = 0.7, 0.3
     prob[4] = 0.0  # HollowNet could not classify it
-    cls = [O, O, O, W, O]
+    cls = [OT, OT, OT, W, OT]
     out = not_clutter(cls, prob, [0.5, 3.0, np.nan, 9.0, 9.0], [4.0, 4.0, 20.0, 4.0, 4.0], max_base=2.0,
                       max_size=15.0)
-    assert out.tolist() == [O, D, D, W, O]
+    assert out.tolist() == [OT, D, D, W, OT]
     # A test set to None is off; an unknown base (NaN) never moves a part.
     assert not_clutter(cls, prob, [3.0] * 5, [20.0] * 5, max_base=None, max_size=None).tolist() == cls
     assert not_clutter(cls, prob, [np.nan] * 5, [4.0] * 5, max_base=2.0, max_size=None).tolist() == cls
     with pytest.raises(ValueError, match="base"):
         not_clutter(cls, prob, [0.0], [4.0] * 5, max_base=2.0, max_size=15.0)
     with pytest.raises(ValueError, match="probabilities"):
-        not_clutter([O], np.zeros((1, 3)), [0.0], [1.0], max_base=2.0, max_size=15.0)
+        not_clutter([OT], np.zeros((1, 3)), [0.0], [1.0], max_base=2.0, max_size=15.0)
 
 
 def test_not_clutter_wrapper_measures_each_part_from_the_ground():
@@ -150,15 +150,15 @@ def test_not_clutter_wrapper_measures_each_part_from_the_ground():
     tall = rng.uniform(0, 1, (400, 3)) * [6.0, 12.0, 27.0]
     clf = NotClutter(_Clutter(), ground=0.0, max_base=2.0, max_size=15.0)
     cls, score, _ = clf.predict([bush, raised, tall])
-    assert cls.tolist() == [O, D, D]
+    assert cls.tolist() == [OT, D, D]
     wide = rng.uniform(0, 1, (400, 3)) * [4.0, 20.0, 3.0]  # 20 m long, on the ground: no clutter either
     assert clf.predict([wide])[0].tolist() == [D]
     np.testing.assert_array_equal(score, 0.7)
     # One ground per part; no ground: only the height test.
     assert NotClutter(_Clutter(), ground=[0.0, 11.0, 0.0], max_base=2.0,
-                      max_size=15.0).predict([bush, raised, tall])[0].tolist() == [O, O, D]
+                      max_size=15.0).predict([bush, raised, tall])[0].tolist() == [OT, OT, D]
     assert NotClutter(_Clutter(), ground=None, max_base=2.0,
-                      max_size=15.0).predict([bush, raised, tall])[0].tolist() == [O, O, D]
+                      max_size=15.0).predict([bush, raised, tall])[0].tolist() == [OT, OT, D]
     with pytest.raises(ValueError, match="ground"):
         NotClutter(_Clutter(), ground=[0.0, 1.0], max_base=2.0, max_size=None).predict([bush, raised, tall])
     with pytest.raises(ValueError, match="max_base"):
@@ -189,7 +189,7 @@ def test_the_tree_stage_reads_the_clutter_rule_from_its_params():
     assert n_inst == 1
     off = TreeStageParams(max_depth=0, roof_min_height=None, other_max_base=None)
     values, cols, _ = _group_tree(xyz, 0, off, _Clutter(), 0.0, 0)
-    assert cols["class_id"] == [O]
+    assert cols["class_id"] == [OT]
     assert TreeStageParams().other_max_base == 2.0
     assert TreeStageParams().other_max_size == 15.0
     for bad in (0.0, -1.0, float("inf"), True):
