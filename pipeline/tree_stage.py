@@ -55,7 +55,8 @@ DECISIONS = ("split-model", "energy")
 #: tree-v8: a minaret instance not taller than tree.pillar_max_height is a pillar;
 #: tree-v9: clutter stands on the ground and is no taller than a tree (tree.tall.not_clutter);
 #: tree-v10: a node is split at its gaps first (tree.sequences.gaps), and clutter is no
-#: larger than a tree along x and y too (tree.other_max_size for other_max_height).
+#: larger than a tree along x and y too (tree.other_max_size for other_max_height);
+#: tree-v11: a wall's storeys cut is judged by the bays below it (tree.look_ahead).
 TREE_ALGORITHM = "tree-v11"
 
 
@@ -68,8 +69,8 @@ class TreeStageParams:
     max_depth : int
         The paper's ``d``.
     look_ahead : bool
-        A storeys split rejected by its own score is kept when one of its storeys would
-        split (``tree.build.build_tree(look_ahead=)``).
+        A wall's storeys cut that no proposal beats is kept when one of its storeys with a
+        row of openings would be cut into bays (``tree.build.build_tree(look_ahead=)``).
     decision : str
         ``"split-model"`` (the learned split model, ``tree/data/split-v1.json``) or
         ``"energy"`` (the paper's ``xi = w . e``, ``tree/data/energy-v1.json``).
