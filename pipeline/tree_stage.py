@@ -38,7 +38,7 @@ from pipeline.coarse import _read_table, _write_table
 from tiling.classes import PLANAR_CLASSES
 from tiling.errors import ConfigError, PipelineError
 from tiling.store import RunStore
-from tree.tall import short_minarets, size_rules
+from tree.tall import short_minarets, size_rules, slender_domes
 
 __all__ = ["TreeStageParams", "tree_batch", "run_tree", "TreeReport", "plan_batches", "group_starts"]
 
@@ -56,8 +56,10 @@ DECISIONS = ("split-model", "energy")
 #: tree-v9: clutter stands on the ground and is no taller than a tree (tree.tall.not_clutter);
 #: tree-v10: a node is split at its gaps first (tree.sequences.gaps), and clutter is no
 #: larger than a tree along x and y too (tree.other_max_size for other_max_height);
-#: tree-v11: a wall's storeys cut is judged by the bays below it (tree.look_ahead).
-TREE_ALGORITHM = "tree-v11"
+#: tree-v11: a wall's storeys cut is judged by the bays below it (tree.look_ahead);
+#: tree-v12: the merge across groups compares the boxes axis by axis and stacks a
+#: minaret's pieces (tree.merge), and a tall slender dome is a minaret (tree.tall.slender_domes).
+TREE_ALGORITHM = "tree-v12"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -233,9 +235,12 @@ def _group_tree(pts: np.ndarray, s: int, params: TreeStageParams, clf: Any, grou
         res_class = res.class_id
     node_class = res.nodes.class_id
     if params.pillar_max_height is not None and len(res.instance_node):
-        # A minaret instance not taller than a pillar is a pillar (tree/tall.py).
+        # A tall slender dome is a minaret, and a minaret instance not taller than a
+        # pillar is a pillar (tree/tall.py).
         box = res.nodes.bbox[res.instance_node]
-        inst_class = short_minarets(node_class[res.instance_node], box[:, 5] - box[:, 2], params.pillar_max_height)
+        height, width = box[:, 5] - box[:, 2], np.maximum(box[:, 3] - box[:, 0], box[:, 4] - box[:, 1])
+        inst_class = short_minarets(slender_domes(node_class[res.instance_node], height, width,
+                                                  params.pillar_max_height), height, params.pillar_max_height)
         node_class = node_class.copy()
         node_class[res.instance_node] = inst_class
         res_class = np.where(res.instance > 0, inst_class[np.maximum(res.instance, 1) - 1], res_class)

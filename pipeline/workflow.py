@@ -156,7 +156,7 @@ class TreeSection(_Section):
         1_000_000, description="an element group with more points builds its tree on a seeded sample of this many (0 or at least 1000); its points take their nearest sampled point's labels (bounded memory); 0 = never sample")
 
     pillar_max_height: Annotated[float, Field(gt=0)] | None = Field(
-        10.0, description="a part HollowNet calls pillar that is taller than this (m) is a minaret unless its footprint is flat, and a minaret instance not taller than this is a pillar (HollowNet cannot see size; its training pillars are 2.5-8 m, its minarets 12-40 m); null = HollowNet's class as it is")
+        10.0, description="a part HollowNet calls pillar that is taller than this (m) is a minaret unless its footprint is flat, and a minaret instance not taller than this is a pillar (HollowNet cannot see size; its training pillars are 2.5-8 m, its minarets 12-40 m); with it on, a dome instance taller than this and more than 1.5 times as tall as it is wide is a minaret; null = HollowNet's class as it is")
 
     other_max_base: Annotated[float, Field(gt=0)] | None = Field(
         2.0, description="a part HollowNet calls other (clutter) whose lowest point is more than this (m) above the local ground takes its next most probable class (clutter stands on the ground; a dome on its drum looks like a bush to HollowNet); null = no such test")

@@ -62,3 +62,29 @@ def test_many_instances_are_compared_in_blocks(monkeypatch):
     monkeypatch.setattr(tm, "_PAIR_BLOCK", 1000)
     np.testing.assert_array_equal(merge_instances(np.arange(1, 301), cls, grp, boxes, 300), whole)
     assert (whole != np.arange(301)).sum() > 0
+
+
+def test_a_portals_face_joins_the_passage_behind_it():
+    """Wazir Khan's gateway portal: the front face (1 m deep, 14 m high) went to one group,
+    the passage behind it (2.4 m deep, 9 m high) to another. They share most of the face's
+    depth but a third of the passage's box: the volume of the smaller box would not do."""
+    face, passage = [45.5, -4.3, 0.0, 46.1, 4.0, 14.1], [43.5, -2.5, 0.0, 45.9, 2.5, 9.1]
+    m = merge_instances([1, 2], [A, A], [1, 2], [face, passage], 2)
+    assert m.tolist() == [0, 1, 1]
+
+
+def test_a_minarets_pieces_join_when_one_stands_on_the_other():
+    """A minaret's side face (0-11 m), its far side (0-23 m) and its top (23.3-31 m) from
+    three groups are one minaret; a second minaret beside it, and a dome above the first
+    one's footprint (another class), stay apart."""
+    M = int(ClassId.MINARET)
+    side, far, top = [0, 0, 0, 2, 4, 11], [0, 0, 0, 5, 5, 23], [0.5, 0.5, 23.3, 4.5, 4.5, 31]
+    other = [9, 0, 0, 14, 5, 30]
+    m = merge_instances([1, 2, 3, 4, 5], [M, M, M, M, D], [1, 2, 3, 4, 5], [side, far, top, other, top], 5)
+    assert m.tolist() == [0, 1, 1, 1, 4, 5]
+    # 1 m between the heights (more than the two pads): not one shaft
+    apart = merge_instances([1, 2], [M, M], [1, 2], [far, [0, 0, 24.0, 5, 5, 31]], 2)
+    assert apart.tolist() == [0, 1, 2]
+    # footprints side by side, each under 60 % of the other's: two minarets
+    beside = merge_instances([1, 2], [M, M], [1, 2], [far, [3.5, 0, 0, 8.5, 5, 23]], 2)
+    assert beside.tolist() == [0, 1, 2]

@@ -106,6 +106,32 @@ def test_short_minarets_are_pillars_per_instance_in_the_tree_stage():
     assert set(values["class"].tolist()) == {M}
 
 
+def test_slender_domes_are_minarets_per_instance_in_the_tree_stage():
+    """A 23 m stretch of a minaret (4 m across) that HollowNet calls dome is a minaret; a
+    dome on its drum (6 m across, 7 m high) and a chattri (2 m across, 3.8 m high) stay
+    domes; the rule is off with the size rules."""
+    from pipeline.tree_stage import _group_tree
+    from tree.tall import slender_domes
+
+    dome = int(ClassId.DOME)
+    assert slender_domes([dome, dome, dome, M], [23.0, 7.0, 3.8, 30.0], [4.0, 6.0, 2.0, 4.0],
+                         10.0).tolist() == [M, dome, dome, M]
+    with pytest.raises(ValueError, match="height"):
+        slender_domes([dome], [1.0, 2.0], [1.0], 10.0)
+    rng = np.random.default_rng(4)
+    t = rng.uniform(0, 2 * np.pi, 3000)
+    params = TreeStageParams(max_depth=0, roof_min_height=None)
+    for radius, height, want in ((2.0, 23.0, M), (3.0, 7.0, dome), (1.0, 3.8, dome)):
+        xyz = np.c_[radius * np.cos(t), radius * np.sin(t), rng.uniform(0, height, 3000)]
+        values, cols, _ = _group_tree(xyz, 0, params, _Always(dome), None, 0)
+        assert set(values["class"].tolist()) == {want}
+        assert cols["class_id"] == [want]
+    off = TreeStageParams(max_depth=0, roof_min_height=None, pillar_max_height=None)
+    values, _, _ = _group_tree(np.c_[2.0 * np.cos(t), 2.0 * np.sin(t), rng.uniform(0, 23.0, 3000)], 0, off,
+                               _Always(dome), None, 0)
+    assert set(values["class"].tolist()) == {dome}
+
+
 OT, D = int(ClassId.OTHER), int(ClassId.DOME)
 
 

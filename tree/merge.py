@@ -5,13 +5,18 @@ so an arch whose front face went to one group and its soffit and back to another
 out as two arch instances, each about half the arch: neither covers it with IoU 0.5
 (Khudabad's 12 bays, docs/results.md). After every group's tree, two instances of the
 same class from different groups are one when their bounding boxes, each widened by
-``pad`` metres, overlap by at least ``min_overlap`` of the smaller widened box's volume
+``pad`` metres, overlap by at least ``min_overlap`` of the box that the smaller of the
+two extents on each axis make (a portal's front face, 1 m deep, and its passage behind
+it, 3 m deep, overlap by 0.8 m: most of the face's depth, a third of the passage's box)
 and, along the wall (the horizontal axis on which the two boxes together are longer),
 by at least ``min_overlap`` of their joint length: the two halves of a bay share its
 span along the wall and its height, while neighbouring bays share only a pier's edge,
 stacked storeys only a band, and a bay lying inside the box of a large instance of
 another shape (a minaret's side called arch) only a small part of that box's length.
-Within a group the tree's own split stands. This is not in the paper (its tree never
+Minarets (``stacked``) are also one when their widened footprints overlap by at least
+``min_overlap`` of the smaller footprint and their widened heights meet: a minaret is one
+shaft, whose lower side face and far side, or lower and upper stretches, can come from
+different groups. Within a group the tree's own split stands. This is not in the paper (its tree never
 sees two groups at once).
 
 Pure NumPy.
@@ -24,10 +29,14 @@ import numpy.typing as npt
 
 from tiling.classes import ClassId
 
-__all__ = ["MERGE_CLASSES", "MERGE_MIN_OVERLAP", "MERGE_PAD", "merge_instances"]
+__all__ = ["MERGE_CLASSES", "MERGE_MIN_OVERLAP", "MERGE_PAD", "MERGE_STACKED", "merge_instances"]
 
 #: Classes whose instances are merged across element groups.
 MERGE_CLASSES: tuple[int, ...] = (int(ClassId.ARCH), int(ClassId.DOME), int(ClassId.MINARET))
+#: Classes whose instances are also merged when one stands on the other: a minaret is
+#: one shaft, so two of its pieces (a side face and the far side, a lower and an upper
+#: stretch) are one when their footprints overlap and their heights meet.
+MERGE_STACKED: tuple[int, ...] = (int(ClassId.MINARET),)
 #: Widening of each instance's box (metres): a face (a plane, its box flat) gets a body.
 MERGE_PAD = 0.25
 #: Share of the smaller widened box that the two boxes' intersection must cover.
@@ -44,8 +53,8 @@ def _find(parent: npt.NDArray[np.int64], i: int) -> int:
 
 def merge_instances(instance: npt.ArrayLike, class_id: npt.ArrayLike, group: npt.ArrayLike,
                     bbox: npt.ArrayLike, n_instances: int, *, classes: tuple[int, ...] = MERGE_CLASSES,
-                    pad: float = MERGE_PAD, min_overlap: float = MERGE_MIN_OVERLAP
-                    ) -> npt.NDArray[np.uint32]:
+                    pad: float = MERGE_PAD, min_overlap: float = MERGE_MIN_OVERLAP,
+                    stacked: tuple[int, ...] = MERGE_STACKED) -> npt.NDArray[np.uint32]:
     """The map from instance ids ``0..n_instances`` to merged ids (``map[0] == 0``; an
     instance kept alone maps to itself, a merged set to its smallest id).
 
@@ -66,6 +75,11 @@ def merge_instances(instance: npt.ArrayLike, class_id: npt.ArrayLike, group: npt
     ...        [4, -3, 0, 11, 6, 12]]  # and a large box around the next bay, of another group
     >>> merge_instances([1, 2, 3, 4], [4, 4, 4, 4], [10, 11, 11, 12], box, 4).tolist()
     [0, 1, 1, 3, 4]
+    >>> shaft = [[0, 0, 0, 2, 4, 11], [0, 0, 0, 5, 5, 23], [0, 0, 23.3, 5, 5, 31], [9, 0, 0, 14, 5, 30]]
+    >>> merge_instances([1, 2, 3, 4], [6, 6, 6, 6], [10, 11, 12, 13], shaft, 4).tolist()  # a minaret's pieces
+    [0, 1, 1, 1, 4]
+    >>> merge_instances([1, 2, 3, 4], [4, 4, 4, 4], [10, 11, 12, 13], shaft, 4).tolist()  # arches do not
+    [0, 1, 2, 3, 4]
     """
     inst = np.asarray(instance, dtype=np.int64).reshape(-1)
     cls = np.asarray(class_id, dtype=np.int64).reshape(-1)
@@ -82,22 +96,26 @@ def merge_instances(instance: npt.ArrayLike, class_id: npt.ArrayLike, group: npt
         if len(sel) < 2:
             continue
         lo, hi = box[sel, :3] - pad, box[sel, 3:] + pad
-        vol = np.prod(hi - lo, axis=1)
+        ext = hi - lo
+        area = ext[:, 0] * ext[:, 1]
         ids, g = inst[sel], grp[sel]
         # Every pair of the class, _PAIR_BLOCK pairs at a time.
         step = max(1, _PAIR_BLOCK // len(sel))
         for r0 in range(0, len(sel), step):
             r = slice(r0, r0 + step)
-            inter = np.prod(np.clip(np.minimum(hi[r, None], hi[None]) - np.maximum(lo[r, None], lo[None]), 0, None),
-                            axis=2)
+            side = np.clip(np.minimum(hi[r, None], hi[None]) - np.maximum(lo[r, None], lo[None]), 0, None)
+            inter = np.prod(side, axis=2)
             # Along the wall: the horizontal axis on which the pair's union is longer.
             span = np.maximum(hi[r, None, :2], hi[None, :, :2]) - np.minimum(lo[r, None, :2], lo[None, :, :2])
             wall = np.argmax(span, axis=2)[..., None]
             common = np.take_along_axis(np.clip(np.minimum(hi[r, None, :2], hi[None, :, :2])
                                                 - np.maximum(lo[r, None, :2], lo[None, :, :2]), 0, None), wall, 2)
-            ok = ((inter >= min_overlap * np.minimum(vol[r, None], vol[None]))
-                  & (common[..., 0] >= min_overlap * np.take_along_axis(span, wall, 2)[..., 0])
-                  & (g[r, None] != g[None]))
+            ok = ((inter >= min_overlap * np.prod(np.minimum(ext[r, None], ext[None]), axis=2))
+                  & (common[..., 0] >= min_overlap * np.take_along_axis(span, wall, 2)[..., 0]))
+            if c in stacked:  # one shaft: footprints that overlap, heights that meet
+                foot = side[..., 0] * side[..., 1]
+                ok |= ((foot >= min_overlap * np.minimum(area[r, None], area[None])) & (side[..., 2] > 0))
+            ok &= g[r, None] != g[None]
             a, b = np.nonzero(ok)
             for i, j in zip(ids[r][a].tolist(), ids[b].tolist(), strict=True):
                 ri, rj = _find(parent, i), _find(parent, j)
