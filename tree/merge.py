@@ -39,7 +39,9 @@ MERGE_CLASSES: tuple[int, ...] = (int(ClassId.ARCH), int(ClassId.DOME), int(Clas
 MERGE_STACKED: tuple[int, ...] = (int(ClassId.MINARET),)
 #: Widening of each instance's box (metres): a face (a plane, its box flat) gets a body.
 MERGE_PAD = 0.25
-#: Share of the smaller widened box that the two boxes' intersection must cover.
+#: Share that the two widened boxes' intersection must cover of the box made by the
+#: smaller extent on each axis, their overlap along the wall of their joint length, and
+#: (``MERGE_STACKED``) their footprints' overlap of the smaller footprint.
 MERGE_MIN_OVERLAP = 0.6
 _PAIR_BLOCK = 1 << 21
 
