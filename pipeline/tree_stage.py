@@ -58,8 +58,10 @@ DECISIONS = ("split-model", "energy")
 #: larger than a tree along x and y too (tree.other_max_size for other_max_height);
 #: tree-v11: a wall's storeys cut is judged by the bays below it (tree.look_ahead);
 #: tree-v12: the merge across groups compares the boxes axis by axis and stacks a
-#: minaret's pieces (tree.merge), and a tall slender dome is a minaret (tree.tall.slender_domes).
-TREE_ALGORITHM = "tree-v12"
+#: minaret's pieces (tree.merge), and a tall slender dome is a minaret (tree.tall.slender_domes);
+#: tree-v13: a root nothing splits is cut into its parts apart when HollowNet calls them
+#: different classes, one a dome (tree.sequences.parts, tree.build.PART_CLASSES).
+TREE_ALGORITHM = "tree-v13"
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -311,6 +311,105 @@ def test_the_tree_splits_the_root_at_its_gaps_first(monkeypatch):
     assert len(r0.nodes) == 1
 
 
+def _shaft_and_chattri(rng):
+    """A minaret's shaft (r 1.5 m, 12 m tall) and a chattri beside it (a 2 m box of
+    points from 8 to 11 m) 0.3 m off the shaft: side by side, overlapping in height."""
+    shaft = _bastion(rng, (0.0, 0.0), r=1.5, height=12.0, n=12000)
+    chattri = np.c_[rng.uniform(1.8, 3.8, 3000), rng.uniform(-1.0, 1.0, 3000), rng.uniform(8.0, 11.0, 3000)]
+    return shaft, chattri
+
+
+class _TallMinaretElseDome:
+    """Calls a part with points on both sides of x = 1.65 (shaft and chattri together)
+    ``whole``, one taller than 5 m minaret, any other dome."""
+
+    def __init__(self, whole=int(ClassId.ARCH)):
+        self.whole = whole
+
+    def predict(self, segments):
+        both = np.array([s[:, 0].min() < 1.65 < s[:, 0].max() for s in segments])
+        tall = np.array([np.ptp(s[:, 2]) > 5.0 for s in segments])
+        cls = np.where(both, self.whole, np.where(tall, int(ClassId.MINARET), int(ClassId.DOME)))
+        prob = np.zeros((len(segments), NUM_CLASSES - 1))
+        prob[np.arange(len(segments)), cls - 1] = 1.0
+        return cls, np.ones(len(segments)), prob
+
+
+class _Never:
+    """A stand-in split model that keeps no proposal."""
+
+    threshold = 0.5
+
+    def probability(self, features):
+        return np.zeros(len(features))
+
+
+def test_parts_apart_are_found_in_any_direction():
+    """The chattri 0.3 m off the shaft is a part (the gap cut along the wall does not see
+    it: they overlap along every axis but x, by height); pieces under 5 % of the node go
+    with the nearest part; nothing apart, or ``part_gap`` 0, gives None."""
+    from tree.sequences import PART_SEQUENCE, SequenceParams, gaps, parts
+
+    rng = np.random.default_rng(0)
+    shaft, chattri = _shaft_and_chattri(rng)
+    xyz = np.r_[shaft, chattri]
+    assert gaps(xyz) is None
+    pr = parts(xyz)
+    assert pr is not None
+    assert pr.sequence == PART_SEQUENCE
+    assert [len(c) for c in pr.children] == [len(shaft), len(chattri)]
+    crumbs = np.c_[np.full(50, 4.5), np.zeros(50), np.linspace(8, 11, 50)]  # 0.7 m off the chattri
+    pr = parts(np.r_[xyz, crumbs])
+    assert [len(c) for c in pr.children] == [len(shaft), len(chattri) + 50]
+    assert parts(shaft) is None
+    assert parts(xyz, params=SequenceParams(part_gap=0.0)) is None
+    assert parts(xyz, params=SequenceParams(part_gap=0.5)) is None  # 0.3 m apart: one part at 0.5 m
+
+
+def test_a_root_nothing_splits_is_cut_into_parts_of_different_classes():
+    """Only when HollowNet calls the parts different things, one a dome at least 2 m tall,
+    and the whole no dome, minaret or other: a shaft and a chattri (minaret, dome) called
+    arch together are two instances; called minaret both, or arch and pillar, a chattri
+    1.5 m tall, or the whole called dome, the root stays whole."""
+    from tree.sequences import PART_SEQUENCE
+
+    rng = np.random.default_rng(1)
+    shaft, chattri = _shaft_and_chattri(rng)
+    xyz = np.r_[shaft, chattri]
+    r = build_tree(xyz, _TallMinaretElseDome(), rng=0, split=_Never())
+    kids = r.nodes.children(0)
+    assert r.nodes.sequence[kids].tolist() == [PART_SEQUENCE] * 2
+    assert r.class_id[: len(shaft)].tolist() == [int(ClassId.MINARET)] * len(shaft)
+    assert r.class_id[len(shaft):].tolist() == [int(ClassId.DOME)] * len(chattri)
+    assert len(np.unique(r.instance)) == 2
+    r1 = build_tree(xyz, _Always(int(ClassId.MINARET)), rng=0, split=_Never())
+    assert len(r1.nodes) == 1
+    assert len(np.unique(r1.instance)) == 1
+    # Parts that are no dome or minaret (a bay's jambs called arch and pillar): whole.
+    r2 = build_tree(xyz, _TallArchElsePillar(), rng=0, split=_Never())
+    assert len(r2.nodes) == 1
+    # A part called dome under PART_MIN_HEIGHT (1.5 m): whole.
+    low = np.r_[shaft, chattri * [1.0, 1.0, 0.5] + [0.0, 0.0, 4.0]]
+    assert np.ptp(low[len(shaft):, 2]) < 2.0
+    r4 = build_tree(low, _TallMinaretElseDome(), rng=0, split=_Never())
+    assert len(r4.nodes) == 1
+    # A root called dome, minaret or other: whole, whatever its parts are called.
+    for whole in (ClassId.DOME, ClassId.MINARET, ClassId.OTHER):
+        r3 = build_tree(xyz, _TallMinaretElseDome(int(whole)), rng=0, split=_Never())
+        assert len(r3.nodes) == 1
+
+
+class _TallArchElsePillar:
+    """Calls a part taller than 5 m arch, any other pillar."""
+
+    def predict(self, segments):
+        tall = np.array([np.ptp(s[:, 2]) > 5.0 for s in segments])
+        cls = np.where(tall, int(ClassId.ARCH), int(ClassId.PILLAR))
+        prob = np.zeros((len(segments), NUM_CLASSES - 1))
+        prob[np.arange(len(segments)), cls - 1] = 1.0
+        return cls, np.ones(len(segments)), prob
+
+
 class _ByProposal:
     """A stand-in split model: probability 0.9 for an S2 proposal, 0.1 for any other."""
 

@@ -26,7 +26,15 @@ import numpy.typing as npt
 from tiling.classes import ELEMENT_CLASSES, ClassId
 from tree.energy import Classifier, EnergyModel, energy_terms, load_energy_model
 from tree.operators import RngLike, h
-from tree.sequences import GAP_SEQUENCE, Proposal, SequenceParams, gaps, propose
+from tree.sequences import (
+    GAP_SEQUENCE,
+    PART_SEQUENCE,
+    Proposal,
+    SequenceParams,
+    gaps,
+    parts,
+    propose,
+)
 from tree.split import N_PROBS, SplitModel, split_features
 
 __all__ = ["NodeTable", "TreeResult", "build_tree"]
@@ -38,6 +46,19 @@ _BAYS = (2, 3)
 #: A storey is looked into (``build_tree(look_ahead=)``) when under this share of its wall
 #: projection's cells is occupied (:func:`_solid_share`): it has a row of openings.
 OPEN_STOREY = 0.8
+#: A root is cut into its parts apart (:func:`tree.sequences.parts`) only when HollowNet
+#: calls one part one of these, and that part is at least :data:`PART_MIN_HEIGHT` tall: a
+#: chattri or a small dome standing beside a minaret or a wall. Pieces of an arcade apart
+#: (a bay's two jambs, seen without the arch over them) are one thing whatever HollowNet
+#: calls each, and a strip of a bastion beside its curtain wall, called minaret, is a piece
+#: of a minaret in another group (docs/method.md, tree-v13).
+PART_CLASSES = (int(ClassId.DOME),)
+#: Metres; HollowNet's smallest training dome, a chattri, is about 3.3 m tall.
+PART_MIN_HEIGHT = 2.0
+#: A root HollowNet calls one of these is not cut into parts apart: a dome or a minaret is
+#: a standalone element itself, and clutter (``other``) in pieces is clutter. On Wazir Khan
+#: such roots were rows of arcade bays seen in pieces (docs/method.md, tree-v13).
+WHOLE_ROOT_CLASSES = (int(ClassId.DOME), int(ClassId.MINARET), int(ClassId.OTHER))
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
@@ -56,7 +77,8 @@ class NodeTable:
     depth : ndarray of int64
     sequence : ndarray of int8
         The sequence (1, 2, 3) whose split produced the node; 0 for the root, 5
-        (``tree.sequences.GAP_SEQUENCE``) for a cut at gaps.
+        (``tree.sequences.GAP_SEQUENCE``) for a cut at gaps, 6
+        (``tree.sequences.PART_SEQUENCE``) for a root's parts apart.
     terms : ndarray of float64, shape (n_nodes, 5)
         e1..e5 of the split that produced the node (NaN for the root).
     xi : ndarray of float64
@@ -195,6 +217,11 @@ def build_tree(
 ) -> TreeResult:
     """Build the hierarchical tree of one segment (Algorithm 1).
 
+    Not in the paper: before any proposal the root is cut at its gaps
+    (:func:`tree.sequences.gaps`), and a root that no proposal splits is cut into its parts
+    apart (:func:`tree.sequences.parts`) when HollowNet calls one of them a dome
+    (:data:`PART_CLASSES`; docs/method.md).
+
     Parameters
     ----------
     xyz : array-like of shape (n_points, 3)
@@ -325,6 +352,21 @@ def build_tree(
     def _best(scored: list[tuple[float, int, Any]]) -> tuple[float, int, Any]:
         return scored[int(np.argmax([x for x, _, _ in scored]))]  # the first of equal scores, as before
 
+    def _split_parts(node: int, idx: IntArray, pts: FloatArray) -> None:
+        """A root that nothing split: into its parts apart (:func:`tree.sequences.parts`)
+        when HollowNet calls them different classes, one of them of :data:`PART_CLASSES`
+        and at least :data:`PART_MIN_HEIGHT` tall, and the root none of
+        :data:`WHOLE_ROOT_CLASSES`."""
+        if depth[node] != 0 or cls[node] in WHOLE_ROOT_CLASSES:
+            return
+        part = parts(pts, params=params)
+        if part is None:
+            return
+        c_cls, c_sc, c_pr = _classify(classifier, [pts[c] for c in part.children])
+        height = np.array([np.ptp(pts[c, 2]) for c in part.children])
+        if len(np.unique(c_cls)) > 1 and (np.isin(c_cls, PART_CLASSES) & (height >= PART_MIN_HEIGHT)).any():
+            _add_children(node, idx, part.children, part.sequence, np.full(5, np.nan), np.nan, c_cls, c_sc, c_pr)
+
     while stack:
         node, idx = stack.pop()
         if depth[node] >= max_depth or len(idx) < max(params.min_points, 2):
@@ -340,6 +382,7 @@ def build_tree(
         node_rng = np.random.default_rng(np.random.SeedSequence([base, node]))
         scored = _scored(pts, depth[node], cls[node], probs[node], node_rng)
         if not scored:
+            _split_parts(node, idx, pts)
             continue
         x, key, (pr, e, c_cls, c_sc, c_pr) = _best(scored)
         keep = x >= thr_split
@@ -359,6 +402,7 @@ def build_tree(
                     x, key, (pr, e, c_cls, c_sc, c_pr) = storey[0]
                     break
         if not keep:
+            _split_parts(node, idx, pts)
             continue
         children = pr.children
         if pr.kept_children is not None:  # the storeys' bands, each a child (tree/sequences.py)
@@ -391,8 +435,8 @@ def _per_point(nodes: NodeTable, leaf_of: IntArray) -> TreeResult:
         if nodes.class_id[i] == nodes.class_id[par]:
             same[par] += int(nodes.n_points[i])
     element &= nodes.is_leaf | (2 * same >= nodes.n_points)
-    # Parts cut at gaps do not touch: they are different things whatever their classes.
-    gap_parent = nodes.parent[(nodes.sequence == GAP_SEQUENCE) & (nodes.parent >= 0)]
+    # Parts cut at gaps or apart do not touch: they are different things whatever their classes.
+    gap_parent = nodes.parent[np.isin(nodes.sequence, (GAP_SEQUENCE, PART_SEQUENCE)) & (nodes.parent >= 0)]
     element[gap_parent] = False
     inst_nodes: list[int] = []
     for i in range(m):  # parents come before children (creation order)

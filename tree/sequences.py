@@ -28,7 +28,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from scipy.spatial import cKDTree
 
+from primitives.dbscan import dbscan_labels
 from tree.operators import (
     Histogram,
     RngLike,
@@ -46,8 +48,8 @@ from tree.operators import (
     v2,
 )
 
-__all__ = ["GAP_SEQUENCE", "SEQUENCES", "Proposal", "SequenceParams", "gaps", "occupancy_cut", "propose", "s1", "s2",
-           "s3", "storeys"]
+__all__ = ["GAP_SEQUENCE", "PART_SEQUENCE", "SEQUENCES", "Proposal", "SequenceParams", "gaps", "occupancy_cut", "parts", "propose", "s1",
+           "s2", "s3", "storeys"]
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
@@ -60,6 +62,14 @@ SEQUENCES: tuple[int, ...] = (1, 2, 3)
 OPEN_HIGH_PROMINENCE = 0.25
 #: The node table's sequence id of a split at gaps (:func:`gaps`).
 GAP_SEQUENCE = 5
+#: The node table's sequence id of a split into parts apart (:func:`parts`).
+PART_SEQUENCE = 6
+#: A part of :func:`parts` holds at least this share of the node's points (smaller
+#: pieces go with the nearest part).
+PART_MIN_SHARE = 0.05
+#: Two parts of :func:`parts` whose x-y boxes overlap by more than this share of the
+#: smaller box's area are one (one stands on or inside the other).
+PART_MAX_OVERLAP = 0.2
 #: A column of the wall's projection is empty, for :func:`gaps`, when it holds fewer
 #: occupied cells than this share of the node's full columns (their 90th percentile).
 GAP_LEVEL = 0.02
@@ -104,6 +114,10 @@ class SequenceParams:
         A stretch at least this long (metres) along the node's wall with (almost) nothing
         in it separates two parts that do not touch: :func:`tree.build.build_tree` splits
         the root there before anything else (:func:`gaps`). 0 = never.
+    part_gap : float
+        Parts of a node whose points come no closer than this (metres) are apart
+        (:func:`parts`); :func:`tree.build.build_tree` splits a root that nothing else
+        splits into them when HollowNet calls them different classes. 0 = never.
     """
 
     prominence: float = 0.05
@@ -118,6 +132,7 @@ class SequenceParams:
     storeys: bool = True
     bands: bool = True
     gap: float = 2.0
+    part_gap: float = 0.2
 
     def to_dict(self) -> dict[str, object]:
         return dict(self.__dict__)
@@ -475,6 +490,84 @@ def gaps(xyz: npt.ArrayLike, *, params: SequenceParams | None = None) -> Proposa
     part = np.searchsorted(cuts, t)
     children = tuple(np.flatnonzero(part == k).astype(np.int64) for k in range(len(cuts) + 1))
     return Proposal(sequence=GAP_SEQUENCE, children=children, cuts=cuts, curve=None)
+
+
+def parts(xyz: npt.ArrayLike, *, params: SequenceParams | None = None) -> Proposal | None:
+    """The node as its parts apart, side by side: the sets of points joined by steps of at
+    most ``params.part_gap`` (DBSCAN with one sample, :func:`primitives.dbscan.dbscan_labels`)
+    that hold at least :data:`PART_MIN_SHARE` of the node and ``params.min_points`` (every
+    smaller piece goes with the part nearest to it), then joined while two of them have
+    x-y boxes that overlap by more than :data:`PART_MAX_OVERLAP` of the smaller one (the
+    stages of a minaret apart at a balcony's shadow stand one on the other: one part).
+    None when fewer than two parts are left (or ``params.part_gap`` is 0). Children in
+    the order of their lowest point index; no cuts.
+
+    Unlike :func:`gaps` this sees any direction (a chattri standing 0.25 m off a minaret's
+    balcony, beside it and overlapping it in height), and it is not a split by itself:
+    :func:`tree.build.build_tree` keeps it only when the parts are different classes.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> a = rng.uniform(0, 1, (2000, 3)) * [1.0, 1.0, 3.0]
+    >>> b = a[:500] * [0.5, 0.5, 0.2] + [1.3, 0.0, 2.5]     # 0.3 m off a's side
+    >>> pr = parts(np.r_[a, b])
+    >>> pr.sequence, [len(c) for c in pr.children]
+    (6, [2000, 500])
+    >>> parts(a) is None
+    True
+    """
+    a = _as_xyz(xyz)
+    params = params or SequenceParams()
+    if params.part_gap <= 0 or len(a) < 2 * params.min_points:
+        return None
+    label = dbscan_labels(a, eps=params.part_gap, min_samples=1)
+    count = np.bincount(label)
+    big = np.flatnonzero(count >= max(params.min_points, int(np.ceil(PART_MIN_SHARE * len(a)))))
+    if len(big) < 2:
+        return None
+    part = np.searchsorted(big, label)
+    small = ~np.isin(label, big)
+    if small.any():
+        _, j = cKDTree(a[~small]).query(a[small])
+        part[small] = part[~small][j]
+    part = _side_by_side(a, part, len(big))
+    if part.max() == 0:
+        return None
+    children = tuple(np.flatnonzero(part == k).astype(np.int64) for k in range(int(part.max()) + 1))
+    return Proposal(sequence=PART_SEQUENCE, children=children, cuts=np.zeros(0), curve=None)
+
+
+def _side_by_side(a: FloatArray, part: IntArray, n_parts: int) -> IntArray:
+    """Join the parts whose x-y boxes overlap by more than :data:`PART_MAX_OVERLAP` of the
+    smaller box's area (stages of one minaret, a chattri's legs under its roof: one above
+    or inside the other), until every two left stand side by side. Returns parts
+    renumbered ``0..`` in the order of their lowest point index."""
+    lo = np.full((n_parts, 2), np.inf)
+    hi = np.full((n_parts, 2), -np.inf)
+    for axis in range(2):
+        np.minimum.at(lo[:, axis], part, a[:, axis])
+        np.maximum.at(hi[:, axis], part, a[:, axis])
+    root = np.arange(n_parts)
+    joined = True
+    while joined:
+        joined = False
+        live = np.flatnonzero(root == np.arange(n_parts))
+        for i in live.tolist():
+            for j in live.tolist():
+                if j <= i or root[i] != i or root[j] != j:
+                    continue
+                inter = np.prod(np.clip(np.minimum(hi[i], hi[j]) - np.maximum(lo[i], lo[j]), 0.0, None))
+                area = np.prod(np.maximum(hi[[i, j]] - lo[[i, j]], 1e-6), axis=1)
+                if inter > PART_MAX_OVERLAP * float(area.min()):
+                    root[root == j] = i
+                    lo[i], hi[i] = np.minimum(lo[i], lo[j]), np.maximum(hi[i], hi[j])
+                    joined = True
+    _, first = np.unique(root[part], return_index=True)
+    order = np.argsort(first)  # the parts' new numbers, by lowest point index
+    new = np.empty(n_parts, dtype=np.int64)
+    new[np.unique(root[part])[order]] = np.arange(len(order))
+    return new[root[part]]
 
 
 def propose(xyz: npt.ArrayLike, *, params: SequenceParams | None = None,
