@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.tree_stage import MERGE_MAP
+from pipeline.tree_stage import MERGE_CLASS_MAP, MERGE_MAP
 from tiling.classes import NUM_CLASSES
 from tiling.errors import PipelineError
 from tiling.store import CHUNK_POINTS, RunStore
@@ -68,6 +68,8 @@ def _tree_values(store: RunStore, pos: np.ndarray, tree: dict[str, Any]) -> dict
     offsets = np.asarray(tree["instance_offsets"], dtype=np.int64)
     # Instances merged across element groups (tree.merge); a store without the map has none.
     imap = store.read_slice(MERGE_MAP).astype(np.int64) if store.has(MERGE_MAP) else None
+    # Their classes after the merge (a piece that joined an instance of another class); 0 = as is.
+    cmap = store.read_slice(MERGE_CLASS_MAP) if store.has(MERGE_CLASS_MAP) else None
     b_of = np.searchsorted(batches[:, 0], pos, side="right") - 1
     for b in np.unique(b_of).tolist():
         sel = np.flatnonzero(b_of == b)
@@ -81,9 +83,10 @@ def _tree_values(store: RunStore, pos: np.ndarray, tree: dict[str, Any]) -> dict
         arrays = {k: store.read_slice(f"tree/batches/{b}/{k}", lo, hi) for k in ("leaf", "class", "instance", "score")}
         local = local - lo
         out["leaf"][sel] = arrays["leaf"][local]
-        out["class"][sel] = arrays["class"][local]
         inst = arrays["instance"][local].astype(np.int64)
         inst = np.where(inst > 0, inst + offsets[b], 0)
+        merged = cmap[inst] if cmap is not None else np.zeros(len(inst), np.uint8)
+        out["class"][sel] = np.where(merged > 0, merged, arrays["class"][local])
         out["instance"][sel] = (imap[inst] if imap is not None else inst).astype(np.uint32)
         out["score"][sel] = arrays["score"][local]
     return out

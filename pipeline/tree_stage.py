@@ -60,8 +60,9 @@ DECISIONS = ("split-model", "energy")
 #: tree-v12: the merge across groups compares the boxes axis by axis and stacks a
 #: minaret's pieces (tree.merge), and a tall slender dome is a minaret (tree.tall.slender_domes);
 #: tree-v13: a root nothing splits is cut into its parts apart when HollowNet calls them
-#: different classes, one a dome (tree.sequences.parts, tree.build.PART_CLASSES).
-TREE_ALGORITHM = "tree-v13"
+#: different classes, one a dome (tree.sequences.parts, tree.build.PART_CLASSES);
+#: tree-v14: an arch stacked with a minaret of another group is part of it (tree.merge.MERGE_INTO).
+TREE_ALGORITHM = "tree-v14"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -198,6 +199,9 @@ _BOX = ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax")
 #: The instance map of the merge across element groups (:mod:`tree.merge`): entry ``i``
 #: is the instance that batch-global instance ``i`` belongs to (0 stays 0).
 MERGE_MAP = "tree/merge/instance_map"
+#: The class of each batch-global instance after the merge (:func:`tree.merge.merged_classes`:
+#: a piece that joined an instance of another class takes that class); 0 = as the tree said.
+MERGE_CLASS_MAP = "tree/merge/class_map"
 
 
 def group_starts(store: RunStore) -> np.ndarray:
@@ -433,13 +437,17 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any) -> TreeReport:
                              pa.array(np.where(inst > 0, inst + inst_offsets[b], 0)))
             tables.append(t)
         nodes = pa.concat_tables(tables) if tables else None
-        imap = _merge_map(nodes, int(inst_offsets[-1]))
+        imap, cmap = _merge_map(nodes, int(inst_offsets[-1]))
         if nodes is not None:
             inst = np.asarray(nodes.column("instance").to_numpy(), dtype=np.int64)
             nodes = nodes.set_column(nodes.schema.get_field_index("instance"), "instance",
                                      pa.array(imap[inst].astype(np.int64)))
+            cls = np.asarray(nodes.column("class_id").to_numpy()).copy()
+            cls[inst > 0] = np.where(cmap[inst[inst > 0]] > 0, cmap[inst[inst > 0]], cls[inst > 0])
+            nodes = nodes.set_column(nodes.schema.get_field_index("class_id"), "class_id",
+                                     pa.array(cls, type=nodes.schema.field("class_id").type))
             _write_table(store, "tree/nodes.parquet", nodes)
-        store.write_unit("tree/merge", {"instance_map": imap})
+        store.write_unit("tree/merge", {"instance_map": imap, "class_map": cmap})
     n_merged = int(np.count_nonzero(store.read_slice(MERGE_MAP) != np.arange(int(inst_offsets[-1]) + 1))) \
         if store.has(MERGE_MAP) else 0
     n_nodes = sum(int(i["n_nodes"]) for i in infos)
@@ -451,14 +459,16 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any) -> TreeReport:
                       seconds=time.perf_counter() - t0)
 
 
-def _merge_map(nodes: pa.Table | None, n_instances: int) -> np.ndarray:
-    """The instance map of :func:`tree.merge.merge_instances` over every instance node."""
-    from tree.merge import merge_instances
+def _merge_map(nodes: pa.Table | None, n_instances: int) -> tuple[np.ndarray, np.ndarray]:
+    """The instance map of :func:`tree.merge.merge_instances` over every instance node, and
+    the class of every instance after it (:func:`tree.merge.merged_classes`)."""
+    from tree.merge import merge_instances, merged_classes
 
     if nodes is None or nodes.num_rows == 0:
-        return np.arange(n_instances + 1, dtype=np.uint32)
+        return np.arange(n_instances + 1, dtype=np.uint32), np.zeros(n_instances + 1, dtype=np.uint8)
     inst = np.asarray(nodes.column("instance").to_numpy(), dtype=np.int64)
     sel = np.flatnonzero(inst > 0)
     col = {c: np.asarray(nodes.column(c).to_numpy())[sel] for c in ("class_id", "segment", *_BOX)}
-    return merge_instances(inst[sel], col["class_id"], col["segment"], np.column_stack([col[c] for c in _BOX]),
+    imap = merge_instances(inst[sel], col["class_id"], col["segment"], np.column_stack([col[c] for c in _BOX]),
                            n_instances)
+    return imap, merged_classes(inst[sel], col["class_id"], imap)

@@ -9,6 +9,7 @@ import pytest
 from pipeline.labels import LABEL_DTYPES, LEAF_BITS
 from pipeline.run import run_workflow
 from pipeline.workflow import load_workflow
+from tiling.classes import ClassId
 from tiling.grid import TileGrid
 from tiling.store import RunStore
 
@@ -164,3 +165,33 @@ def test_instances_merged_across_groups_reach_labels_and_nodes(tmp_path, scan, m
     np.testing.assert_array_equal(merged["instance"], np.minimum(plain["instance"], 1))
     nodes = pq.read_table(tmp_path / "all" / "s.zarr" / "tree" / "nodes.parquet").column("instance").to_numpy()
     assert set(np.unique(nodes).tolist()) <= {0, 1}
+
+
+def test_classes_after_the_merge_reach_labels_and_nodes(tmp_path, scan, monkeypatch):
+    """The tree stage's class map (tree.merge.merged_classes: a piece that joined an
+    instance of another class takes its class) is what labels/class and the instance
+    nodes of tree/nodes.parquet hold; points in no instance keep the tree's class."""
+    import pyarrow.parquet as pq
+
+    import tree.merge as tm
+    from pipeline.tree_stage import MERGE_CLASS_MAP
+
+    tree = "{enabled: true, max_depth: 1}"
+    plain_store, plain = _run(tmp_path / "plain", scan, tree=tree)
+    assert plain_store.has(MERGE_CLASS_MAP)
+
+    def all_other(instance, class_id, instance_map, **kw):
+        out = np.full(len(instance_map), int(ClassId.OTHER), dtype=np.uint8)
+        out[0] = 0
+        return out
+
+    monkeypatch.setattr(tm, "merged_classes", all_other)
+    _, merged = _run(tmp_path / "other", scan, tree=tree)
+    inside = plain["instance"] > 0
+    assert inside.any()
+    assert (~inside).any()
+    assert (merged["class"][inside] == int(ClassId.OTHER)).all()
+    np.testing.assert_array_equal(merged["class"][~inside], plain["class"][~inside])
+    nodes = pq.read_table(tmp_path / "other" / "s.zarr" / "tree" / "nodes.parquet")
+    inst = nodes.column("instance").to_numpy()
+    assert (nodes.column("class_id").to_numpy()[inst > 0] == int(ClassId.OTHER)).all()

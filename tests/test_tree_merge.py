@@ -88,3 +88,26 @@ def test_a_minarets_pieces_join_when_one_stands_on_the_other():
     # footprints side by side, each under 60 % of the other's: two minarets
     beside = merge_instances([1, 2], [M, M], [1, 2], [far, [3.5, 0, 0, 8.5, 5, 23]], 2)
     assert beside.tolist() == [0, 1, 2]
+
+
+def test_an_arch_stacked_with_a_minaret_is_part_of_it():
+    """Wazir Khan's corner minaret: its lower 11 m with the balcony (a group HollowNet calls
+    arch, 4.5 x 9.7 m with a strip of wall) under the shaft's upper 20 m (another group,
+    4.5 x 4.5 m) is one minaret and takes its class. An arcade's end bay beside the
+    minaret (a quarter of its footprint), an arch of the minaret's own group, an arch
+    1 m below, and (``into=()``) the rule off: apart."""
+    from tree.merge import merged_classes
+
+    M = int(ClassId.MINARET)
+    lower, upper = [32.8, 16.8, 0.0, 37.3, 26.5, 10.8], [33.0, 17.0, 11.0, 39.0, 23.0, 31.6]
+    end_bay = [28.9, 19.5, 0.0, 33.5, 20.5, 4.1]
+    m = merge_instances([1, 2, 3], [A, M, A], [1, 2, 3], [lower, upper, end_bay], 3)
+    assert m.tolist() == [0, 1, 1, 3]
+    assert merged_classes([1, 2, 3], [A, M, A], m).tolist() == [0, M, M, A]
+    assert merge_instances([1, 2], [A, M], [1, 1], [lower, upper], 2).tolist() == [0, 1, 2]
+    below = [32.8, 16.8, 0.0, 37.3, 26.5, 9.5]
+    assert merge_instances([1, 2], [A, M], [1, 2], [below, upper], 2).tolist() == [0, 1, 2]
+    assert merge_instances([1, 2], [A, M], [1, 2], [lower, upper], 2, into=()).tolist() == [0, 1, 2]
+    # An arch that joined another arch which stands under a minaret: both take its class;
+    # a dome in a set without a minaret keeps its own.
+    assert merged_classes([1, 2, 3, 4], [A, A, M, D], [0, 1, 1, 1, 4]).tolist() == [0, M, M, M, D]

@@ -16,7 +16,10 @@ another shape (a minaret's side called arch) only a small part of that box's len
 Minarets (``stacked``) are also one when their widened footprints overlap by at least
 ``min_overlap`` of the smaller footprint and their widened heights meet: a minaret is one
 shaft, whose lower side face and far side, or lower and upper stretches, can come from
-different groups. Within a group the tree's own split stands. This is not in the paper (its tree never
+different groups. And a piece of another class that stands under or on a minaret the
+same way (``into``: an `arch`) is part of it and takes its class (:func:`merged_classes`):
+HollowNet calls the lower 11 m of a Wazir Khan corner minaret, with its balcony, `arch`.
+Within a group the tree's own split stands. This is not in the paper (its tree never
 sees two groups at once).
 
 Pure NumPy.
@@ -29,7 +32,8 @@ import numpy.typing as npt
 
 from tiling.classes import ClassId
 
-__all__ = ["MERGE_CLASSES", "MERGE_MIN_OVERLAP", "MERGE_PAD", "MERGE_STACKED", "merge_instances"]
+__all__ = ["MERGE_CLASSES", "MERGE_INTO", "MERGE_MIN_OVERLAP", "MERGE_PAD", "MERGE_STACKED", "merge_instances",
+           "merged_classes"]
 
 #: Classes whose instances are merged across element groups.
 MERGE_CLASSES: tuple[int, ...] = (int(ClassId.ARCH), int(ClassId.DOME), int(ClassId.MINARET))
@@ -37,6 +41,10 @@ MERGE_CLASSES: tuple[int, ...] = (int(ClassId.ARCH), int(ClassId.DOME), int(Clas
 #: one shaft, so two of its pieces (a side face and the far side, a lower and an upper
 #: stretch) are one when their footprints overlap and their heights meet.
 MERGE_STACKED: tuple[int, ...] = (int(ClassId.MINARET),)
+#: Pairs ``(a, b)``: an instance of class ``a`` stacked with one of class ``b`` of another
+#: group (as ``MERGE_STACKED``: footprints overlapping by ``min_overlap`` of the smaller,
+#: heights meeting) is part of it and takes class ``b`` (:func:`merged_classes`).
+MERGE_INTO: tuple[tuple[int, int], ...] = ((int(ClassId.ARCH), int(ClassId.MINARET)),)
 #: Widening of each instance's box (metres): a face (a plane, its box flat) gets a body.
 MERGE_PAD = 0.25
 #: Share that the two widened boxes' intersection must cover of the box made by the
@@ -56,7 +64,8 @@ def _find(parent: npt.NDArray[np.int64], i: int) -> int:
 def merge_instances(instance: npt.ArrayLike, class_id: npt.ArrayLike, group: npt.ArrayLike,
                     bbox: npt.ArrayLike, n_instances: int, *, classes: tuple[int, ...] = MERGE_CLASSES,
                     pad: float = MERGE_PAD, min_overlap: float = MERGE_MIN_OVERLAP,
-                    stacked: tuple[int, ...] = MERGE_STACKED) -> npt.NDArray[np.uint32]:
+                    stacked: tuple[int, ...] = MERGE_STACKED,
+                    into: tuple[tuple[int, int], ...] = MERGE_INTO) -> npt.NDArray[np.uint32]:
     """The map from instance ids ``0..n_instances`` to merged ids (``map[0] == 0``; an
     instance kept alone maps to itself, a merged set to its smallest id).
 
@@ -80,8 +89,10 @@ def merge_instances(instance: npt.ArrayLike, class_id: npt.ArrayLike, group: npt
     >>> shaft = [[0, 0, 0, 2, 4, 11], [0, 0, 0, 5, 5, 23], [0, 0, 23.3, 5, 5, 31], [9, 0, 0, 14, 5, 30]]
     >>> merge_instances([1, 2, 3, 4], [6, 6, 6, 6], [10, 11, 12, 13], shaft, 4).tolist()  # a minaret's pieces
     [0, 1, 1, 1, 4]
-    >>> merge_instances([1, 2, 3, 4], [4, 4, 4, 4], [10, 11, 12, 13], shaft, 4).tolist()  # arches do not
+    >>> merge_instances([1, 2, 3, 4], [4, 4, 4, 4], [10, 11, 12, 13], shaft, 4, into=()).tolist()  # arches do not
     [0, 1, 2, 3, 4]
+    >>> merge_instances([1, 2, 3, 4], [4, 6, 6, 6], [10, 11, 12, 13], shaft, 4).tolist()  # an arch under a minaret
+    [0, 1, 1, 1, 4]
     """
     inst = np.asarray(instance, dtype=np.int64).reshape(-1)
     cls = np.asarray(class_id, dtype=np.int64).reshape(-1)
@@ -119,8 +130,50 @@ def merge_instances(instance: npt.ArrayLike, class_id: npt.ArrayLike, group: npt
                 ok |= ((foot >= min_overlap * np.minimum(area[r, None], area[None])) & (side[..., 2] > 0))
             ok &= g[r, None] != g[None]
             a, b = np.nonzero(ok)
-            for i, j in zip(ids[r][a].tolist(), ids[b].tolist(), strict=True):
-                ri, rj = _find(parent, i), _find(parent, j)
-                if ri != rj:
-                    parent[max(ri, rj)] = min(ri, rj)
+            _union(parent, ids[r][a], ids[b])
+    for ca, cb in into:  # a piece of class ca stacked with an instance of class cb
+        sa, sb = np.flatnonzero(cls == ca), np.flatnonzero(cls == cb)
+        if not len(sa) or not len(sb):
+            continue
+        la, ha, lb, hb = box[sa, :3] - pad, box[sa, 3:] + pad, box[sb, :3] - pad, box[sb, 3:] + pad
+        area_a, area_b = np.prod(ha[:, :2] - la[:, :2], axis=1), np.prod(hb[:, :2] - lb[:, :2], axis=1)
+        step = max(1, _PAIR_BLOCK // len(sb))
+        for r0 in range(0, len(sa), step):
+            r = slice(r0, r0 + step)
+            side = np.clip(np.minimum(ha[r, None], hb[None]) - np.maximum(la[r, None], lb[None]), 0, None)
+            ok = ((side[..., 0] * side[..., 1] >= min_overlap * np.minimum(area_a[r, None], area_b[None]))
+                  & (side[..., 2] > 0) & (grp[sa][r, None] != grp[sb][None]))
+            a, b = np.nonzero(ok)
+            _union(parent, inst[sa][r][a], inst[sb][b])
     return np.array([_find(parent, i) for i in range(n_instances + 1)], dtype=np.uint32)
+
+
+def _union(parent: npt.NDArray[np.int64], left: npt.NDArray[np.int64], right: npt.NDArray[np.int64]) -> None:
+    """Join the sets of each pair; a set's id is its smallest member."""
+    for i, j in zip(left.tolist(), right.tolist(), strict=True):
+        ri, rj = _find(parent, i), _find(parent, j)
+        if ri != rj:
+            parent[max(ri, rj)] = min(ri, rj)
+
+
+def merged_classes(instance: npt.ArrayLike, class_id: npt.ArrayLike, instance_map: npt.ArrayLike, *,
+                   into: tuple[tuple[int, int], ...] = MERGE_INTO) -> npt.NDArray[np.uint8]:
+    """The class of every instance id after the merge (:func:`merge_instances`'s map):
+    its own, unless its merged set holds an instance of class ``b`` of a pair ``(a, b)``
+    of ``into`` and it is of class ``a``; then ``b``. Index 0 (no instance) holds 0.
+
+    >>> merged_classes([1, 2, 3], [4, 6, 4], [0, 1, 1, 3]).tolist()  # 1 (arch) joined 2 (minaret)
+    [0, 6, 6, 4]
+    """
+    inst = np.asarray(instance, dtype=np.int64).reshape(-1)
+    cls = np.asarray(class_id, dtype=np.int64).reshape(-1)
+    imap = np.asarray(instance_map, dtype=np.int64).reshape(-1)
+    out = np.zeros(len(imap), dtype=np.uint8)
+    out[inst] = cls
+    for ca, cb in into:
+        has_b = np.zeros(len(imap), dtype=bool)
+        has_b[imap[inst[cls == cb]]] = True
+        member = np.flatnonzero((out == ca) & has_b[imap])
+        out[member] = cb
+    out[0] = 0
+    return out
