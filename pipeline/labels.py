@@ -36,10 +36,12 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.tree_stage import MERGE_CLASS_MAP, MERGE_MAP
+from pipeline.tree_stage import MERGE_CLASS_MAP, MERGE_MAP, ROWS
 from tiling.classes import NUM_CLASSES
 from tiling.errors import PipelineError
+from tiling.grid import TileGrid
 from tiling.store import CHUNK_POINTS, RunStore
+from tree.rows import ArcadeCells, apply_cells
 
 __all__ = ["LABEL_DTYPES", "RANGE_ROWS", "PART_ROWS", "LEAF_BITS", "run_labels", "labels_tile", "labels_range",
            "part_rows", "LabelsReport"]
@@ -92,6 +94,29 @@ def _tree_values(store: RunStore, pos: np.ndarray, tree: dict[str, Any]) -> dict
     return out
 
 
+def _arcade_cells(store: RunStore, tile: int) -> ArcadeCells:
+    """The arcade cells (``tree/rows/cells``) that reach tile ``tile``'s buffered box; none
+    in a store made before them."""
+    if not store.has(ROWS):
+        return ArcadeCells.empty()
+    cells = ArcadeCells.from_array(store.read_slice(ROWS))
+    if not len(cells):
+        return cells
+    grid = TileGrid.from_dict(store.attrs["grid"])
+    off = np.asarray(store.attrs["coords"]["offset"], dtype=np.float64)
+    x0, y0, x1, y1 = grid.buffered_bounds(tile)
+    keep = np.zeros(len(cells), bool)
+    for k in range(len(cells)):
+        ox, oy, ux, uy = cells.frame[k]
+        t0, t1, q0, q1 = cells.box[k, :4]
+        if cells.trim[k]:  # a cut bay's points beyond its cell can lie anywhere along the line
+            t0, t1 = t0 - 1e3, t1 + 1e3
+        corners = np.array([[ox + t * ux - q * uy, oy + t * uy + q * ux] for t in (t0, t1) for q in (q0, q1)]) + off[:2]
+        keep[k] = (corners[:, 0].max() >= x0 and corners[:, 0].min() <= x1 and corners[:, 1].max() >= y0
+                   and corners[:, 1].min() <= y1)
+    return ArcadeCells(cells.frame[keep], cells.box[keep], cells.instance[keep], cells.take[keep], cells.trim[keep])
+
+
 def _core_labels(store: RunStore, tile: int, start: int, stop: int, cfg: dict[str, Any]
                  ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Original index and labels of the core points among tile rows ``[start, stop)``."""
@@ -106,6 +131,12 @@ def _core_labels(store: RunStore, tile: int, start: int, stop: int, cfg: dict[st
     has = pos >= 0
     if cfg["tree"] and has.any():
         tv = _tree_values(store, pos[has], cfg["tree"])
+        cells = _arcade_cells(store, tile)
+        if len(cells):
+            # Arcade rows (tree/rows.py): bays take their piers, gaps get their bays, end bays lose their end wall.
+            xyz = store.read_slice(f"tiles/{tile}/xyz", start, stop)[core[has]].astype(np.float64)
+            xyz *= np.asarray(store.attrs["coords"]["scale"], dtype=np.float64)
+            tv["class"], tv["instance"] = apply_cells(xyz, tv["class"], tv["instance"], cells)
         leaf[has] = tv["leaf"]
         for k in ("class", "instance", "score"):
             values[k][has] = tv[k]

@@ -35,7 +35,7 @@ import numpy as np
 import pyarrow as pa
 
 from pipeline.coarse import _read_table, _write_table
-from tiling.classes import PLANAR_CLASSES
+from tiling.classes import PLANAR_CLASSES, ClassId
 from tiling.errors import ConfigError, PipelineError
 from tiling.store import RunStore
 from tree.tall import short_minarets, size_rules, slender_domes
@@ -61,8 +61,10 @@ DECISIONS = ("split-model", "energy")
 #: minaret's pieces (tree.merge), and a tall slender dome is a minaret (tree.tall.slender_domes);
 #: tree-v13: a root nothing splits is cut into its parts apart when HollowNet calls them
 #: different classes, one a dome (tree.sequences.parts, tree.build.PART_CLASSES);
-#: tree-v14: an arch stacked with a minaret of another group is part of it (tree.merge.MERGE_INTO).
-TREE_ALGORITHM = "tree-v14"
+#: tree-v14: an arch stacked with a minaret of another group is part of it (tree.merge.MERGE_INTO);
+#: tree-v15: arcades are rows of bays (tree/rows.py: pieces take their piers, gaps get bays,
+#: end bays lose their end wall; tree/samples, tree/rows/cells), and MERGE_INTO_OVERLAP 0.5.
+TREE_ALGORITHM = "tree-v15"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -202,6 +204,8 @@ MERGE_MAP = "tree/merge/instance_map"
 #: The class of each batch-global instance after the merge (:func:`tree.merge.merged_classes`:
 #: a piece that joined an instance of another class takes that class); 0 = as the tree said.
 MERGE_CLASS_MAP = "tree/merge/class_map"
+#: The arcade cells (tree/rows.py, :class:`tree.rows.ArcadeCells`), applied by the labels stage.
+ROWS = "tree/rows/cells"
 
 
 def group_starts(store: RunStore) -> np.ndarray:
@@ -305,12 +309,25 @@ def _sampled_group_tree(store: RunStore, b: int, lo: int, hi: int, s: int, scale
         writer.append({k: v[j] for k, v in values.items()})
         n_leaf += np.bincount(values["leaf"][j].astype(np.int64), minlength=len(n_leaf))
     writer.close(values)
+    _write_samples(store, b, sample, values, params.seed, s)
     # Every node counts the group's points in its leaves (children come after their parent).
     parent = np.asarray(cols["parent"], dtype=np.int64)
     for k in range(len(parent) - 1, 0, -1):
         n_leaf[parent[k]] += n_leaf[k]
     cols["n_points"] = n_leaf.tolist()
     return cols, n_inst
+
+
+def _write_samples(store: RunStore, b: int, xyz: np.ndarray, values: dict[str, np.ndarray], seed: int,
+                   s: int) -> None:
+    """A seeded sample of every arch and dome instance's points of batch ``b``
+    (``tree/samples/<b>``: batch-local instance, store-local metres, points per sampled
+    point, class), for the arcade rows (tree/rows.py)."""
+    from tree.rows import instance_sample
+
+    inst, pts, weight, cls = instance_sample(xyz, values["instance"], values["class"],
+                                             np.random.default_rng(np.random.SeedSequence([seed, s + 1, 2])))
+    store.write_unit(f"tree/samples/{b}", {"instance": inst, "xyz": pts, "weight": weight, "class": cls})
 
 
 def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
@@ -357,6 +374,7 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
             for c in _NODE_COLUMNS:
                 cols[c] += group_cols[c]
         store.write_unit(f"tree/batches/{b}", out)
+        _write_samples(store, b, xyz, out, params.seed, segs[0])
     _write_table(store, f"tree/tables/{b}.parquet", pa.table(cols))
     info = {"params_hash": cfg["params_hash"], "n_segments": segs[1] - segs[0], "n_points": n,
             "n_nodes": len(cols["segment"]), "n_instances": n_inst, "csr": [lo, hi]}
@@ -438,6 +456,8 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any) -> TreeReport:
             tables.append(t)
         nodes = pa.concat_tables(tables) if tables else None
         imap, cmap = _merge_map(nodes, int(inst_offsets[-1]))
+        cells = _arcade_rows(store, len(batches), inst_offsets, imap, cmap)
+        store.write_unit(ROWS.rsplit("/", 1)[0], cells.to_arrays())
         if nodes is not None:
             inst = np.asarray(nodes.column("instance").to_numpy(), dtype=np.int64)
             nodes = nodes.set_column(nodes.schema.get_field_index("instance"), "instance",
@@ -457,6 +477,35 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any) -> TreeReport:
     return TreeReport(n_segments=len(offsets) - 1, n_groups=len(starts) - 1, n_batches=len(batches), batches_run=len(todo),
                       n_nodes=n_nodes, n_instances=int(inst_offsets[-1]) - n_merged, n_merged=n_merged,
                       seconds=time.perf_counter() - t0)
+
+
+def _arcade_rows(store: RunStore, n_batches: int, inst_offsets: np.ndarray, imap: np.ndarray,
+                 cmap: np.ndarray) -> Any:
+    """The arcade cells (tree/rows.py) from the batches' arch and dome samples, after the
+    merge; an arch instance absorbed by a bay is folded into ``imap`` (in place), a dome
+    instance absorbed by a row maps to 0 (no instance; its points in the cells join their bays)."""
+    from tree.rows import arcade_cells
+
+    arch, dome = int(ClassId.ARCH), int(ClassId.DOME)
+    parts: dict[int, dict[int, list[tuple[np.ndarray, np.ndarray]]]] = {arch: {}, dome: {}}
+    for b in range(n_batches):
+        if not store.has(f"tree/samples/{b}"):
+            continue
+        d = store.read_unit(f"tree/samples/{b}", ["instance", "xyz", "weight", "class"])
+        inst = d["instance"].astype(np.int64) + inst_offsets[b]
+        final = np.where(cmap[inst] > 0, cmap[inst], d["class"]).astype(np.int64)  # after the merge
+        merged = imap[inst].astype(np.int64)
+        for c in (arch, dome):
+            keep = final == c
+            for i in np.unique(merged[keep]).tolist():
+                m = keep & (merged == i)
+                parts[c].setdefault(int(i), []).append((d["xyz"][m], d["weight"][m]))
+    samples = {c: {i: (np.concatenate([p for p, _ in v]), np.concatenate([w for _, w in v])) for i, v in by.items()}
+               for c, by in parts.items()}
+    cells, absorbed = arcade_cells(samples[arch], int(inst_offsets[-1]) + 1, domes=samples[dome])
+    for j, i in absorbed.items():
+        imap[imap == j] = i
+    return cells
 
 
 def _merge_map(nodes: pa.Table | None, n_instances: int) -> tuple[np.ndarray, np.ndarray]:

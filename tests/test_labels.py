@@ -195,3 +195,31 @@ def test_classes_after_the_merge_reach_labels_and_nodes(tmp_path, scan, monkeypa
     nodes = pq.read_table(tmp_path / "other" / "s.zarr" / "tree" / "nodes.parquet")
     inst = nodes.column("instance").to_numpy()
     assert (nodes.column("class_id").to_numpy()[inst > 0] == int(ClassId.OTHER)).all()
+
+
+def test_arcade_cells_reach_labels(tmp_path, scan, monkeypatch):
+    """The tree stage's arcade cells (tree/rows.py) are what the labels stage applies:
+    inside a `take` cell the wall, other, pillar and dome points join its bay (class arch),
+    every other point keeps its labels; the cells are kept in tree/rows/cells."""
+    import tree.rows as tr
+    from pipeline.tree_stage import ROWS
+
+    tree = "{enabled: true, max_depth: 1}"
+    plain_store, plain = _run(tmp_path / "plain", scan, tree=tree)
+    assert plain_store.has(ROWS)
+    las = laspy.read(scan)
+    off = np.asarray(plain_store.attrs["coords"]["offset"])
+    xyz = np.column_stack([las.x, las.y, las.z]) - off
+    wall = np.flatnonzero(plain["class"] == int(ClassId.WALL))
+    p = xyz[wall[len(wall) // 2]]
+    cells = tr.ArcadeCells(np.array([[p[0], p[1], 0.6, 0.8]]), np.array([[-3.0, 3.0, -3.0, 3.0, p[2] - 3.0, p[2] + 3.0]]),
+                           np.array([10_000]), np.array([True]), np.array([False]))
+    monkeypatch.setattr(tr, "arcade_cells", lambda samples, next_id, domes=None: (cells, {}))
+    store, got = _run(tmp_path / "cells", scan, tree=tree)
+    np.testing.assert_array_equal(tr.ArcadeCells.from_array(store.read_slice(ROWS)).instance, [10_000])
+    want_cls, want_inst = tr.apply_cells(xyz, plain["class"], plain["instance"], cells)
+    changed = want_inst != plain["instance"]
+    assert changed.sum() > 50
+    assert (want_cls[changed] == int(ClassId.ARCH)).all()
+    np.testing.assert_array_equal(got["class"], want_cls)
+    np.testing.assert_array_equal(got["instance"], want_inst)

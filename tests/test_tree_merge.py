@@ -108,6 +108,11 @@ def test_an_arch_stacked_with_a_minaret_is_part_of_it():
     below = [32.8, 16.8, 0.0, 37.3, 26.5, 9.5]
     assert merge_instances([1, 2], [A, M], [1, 2], [below, upper], 2).tolist() == [0, 1, 2]
     assert merge_instances([1, 2], [A, M], [1, 2], [lower, upper], 2, into=()).tolist() == [0, 1, 2]
+    # The other corner minaret on seed 2 (tree-v15): its lower side with 10 m of wall,
+    # 59 % of it over the shaft's footprint, joins at MERGE_INTO_OVERLAP 0.5, not at 0.6.
+    side, shaft = [-31.69, 16.69, 0.0, -28.8, 26.5, 12.0], [-34.83, 17.0, 10.99, -29.0, 22.99, 31.38]
+    assert merge_instances([1, 2], [A, M], [1, 2], [side, shaft], 2).tolist() == [0, 1, 1]
+    assert merge_instances([1, 2], [A, M], [1, 2], [side, shaft], 2, into_overlap=0.6).tolist() == [0, 1, 2]
     # An arch that joined another arch which stands under a minaret: both take its class;
     # a dome in a set without a minaret keeps its own.
     assert merged_classes([1, 2, 3, 4], [A, A, M, D], [0, 1, 1, 1, 4]).tolist() == [0, M, M, M, D]
