@@ -20,6 +20,9 @@ Store layout written here (``docs/store.md``)::
     tree/tables/<b>.parquet                 the batch's tree nodes (``segment``: the first
                                             global segment of the node's group)
     tree/nodes.parquet                      every node of every segment, instances numbered globally
+    tree/samples/<b>                        a sample of each arch, dome and wall instance (rows, frames)
+    tree/merge/{instance_map, class_map}    the merge across groups, rows and frames
+    tree/rows/cells                         the rows' and frames' cells, applied by the labels stage
 """
 
 from __future__ import annotations
@@ -63,8 +66,13 @@ DECISIONS = ("split-model", "energy")
 #: different classes, one a dome (tree.sequences.parts, tree.build.PART_CLASSES);
 #: tree-v14: an arch stacked with a minaret of another group is part of it (tree.merge.MERGE_INTO);
 #: tree-v15: arcades are rows of bays (tree/rows.py: pieces take their piers, gaps get bays,
-#: end bays lose their end wall; tree/samples, tree/rows/cells), and MERGE_INTO_OVERLAP 0.5.
-TREE_ALGORITHM = "tree-v15"
+#: end bays lose their end wall; tree/samples, tree/rows/cells), and MERGE_INTO_OVERLAP 0.5;
+#: tree-v16: frames (tree/frames.py: a portal's face joins its passage, a lone bay's
+#: intrados takes its piers; wall instances sampled too).
+TREE_ALGORITHM = "tree-v16"
+#: Points sampled from each wall instance for the frames (tree/frames.py): a pier's face
+#: beside a bay's jamb is a strip a few tenths of a metre wide in a facade's wall.
+WALL_SAMPLE_POINTS = 16384
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -320,13 +328,17 @@ def _sampled_group_tree(store: RunStore, b: int, lo: int, hi: int, s: int, scale
 
 def _write_samples(store: RunStore, b: int, xyz: np.ndarray, values: dict[str, np.ndarray], seed: int,
                    s: int) -> None:
-    """A seeded sample of every arch and dome instance's points of batch ``b``
-    (``tree/samples/<b>``: batch-local instance, store-local metres, points per sampled
-    point, class), for the arcade rows (tree/rows.py)."""
+    """A seeded sample of every arch and dome instance's points of batch ``b``, and of
+    every wall instance's (``WALL_SAMPLE_POINTS``) (``tree/samples/<b>``: batch-local
+    instance, store-local metres, points per sampled point, class), for the arcade rows
+    (tree/rows.py) and the frames (tree/frames.py)."""
     from tree.rows import instance_sample
 
-    inst, pts, weight, cls = instance_sample(xyz, values["instance"], values["class"],
-                                             np.random.default_rng(np.random.SeedSequence([seed, s + 1, 2])))
+    rng = np.random.default_rng(np.random.SeedSequence([seed, s + 1, 2]))
+    parts = [instance_sample(xyz, values["instance"], values["class"], rng),
+             instance_sample(xyz, values["instance"], values["class"], rng, n=WALL_SAMPLE_POINTS,
+                             classes=(int(ClassId.WALL),))]
+    inst, pts, weight, cls = (np.concatenate([p[k] for p in parts]) for k in range(4))
     store.write_unit(f"tree/samples/{b}", {"instance": inst, "xyz": pts, "weight": weight, "class": cls})
 
 
@@ -483,11 +495,15 @@ def _arcade_rows(store: RunStore, n_batches: int, inst_offsets: np.ndarray, imap
                  cmap: np.ndarray) -> Any:
     """The arcade cells (tree/rows.py) from the batches' arch and dome samples, after the
     merge; an arch instance absorbed by a bay is folded into ``imap`` (in place), a dome
-    instance absorbed by a row maps to 0 (no instance; its points in the cells join their bays)."""
-    from tree.rows import arcade_cells
+    instance absorbed by a row maps to 0 (no instance; its points in the cells join their
+    bays). Then the frames (tree/frames.py) of the arch instances in no row: a face joins
+    its passage (``imap``; a wall face takes class arch in ``cmap``), and a lone piece's
+    cell follows the rows' cells."""
+    from tree.frames import frame_cells
+    from tree.rows import ArcadeCells, arcade_cells
 
-    arch, dome = int(ClassId.ARCH), int(ClassId.DOME)
-    parts: dict[int, dict[int, list[tuple[np.ndarray, np.ndarray]]]] = {arch: {}, dome: {}}
+    arch, dome, wall = int(ClassId.ARCH), int(ClassId.DOME), int(ClassId.WALL)
+    parts: dict[int, dict[int, list[tuple[np.ndarray, np.ndarray]]]] = {arch: {}, dome: {}, wall: {}}
     for b in range(n_batches):
         if not store.has(f"tree/samples/{b}"):
             continue
@@ -495,7 +511,7 @@ def _arcade_rows(store: RunStore, n_batches: int, inst_offsets: np.ndarray, imap
         inst = d["instance"].astype(np.int64) + inst_offsets[b]
         final = np.where(cmap[inst] > 0, cmap[inst], d["class"]).astype(np.int64)  # after the merge
         merged = imap[inst].astype(np.int64)
-        for c in (arch, dome):
+        for c in (arch, dome, wall):
             keep = final == c
             for i in np.unique(merged[keep]).tolist():
                 m = keep & (merged == i)
@@ -505,7 +521,17 @@ def _arcade_rows(store: RunStore, n_batches: int, inst_offsets: np.ndarray, imap
     cells, absorbed = arcade_cells(samples[arch], int(inst_offsets[-1]) + 1, domes=samples[dome])
     for j, i in absorbed.items():
         imap[imap == j] = i
-    return cells
+    skip = set(cells.instance.tolist()) | set(absorbed)
+    frames, joined = frame_cells({i: v for i, v in samples[arch].items() if i not in skip}, samples[wall], skip)
+    for f, a in joined.items():
+        members = np.flatnonzero(imap == f)
+        imap[members] = a
+        cmap[members] = arch
+    if not len(frames):
+        return cells
+    return ArcadeCells(*(np.concatenate([x, y]) for x, y in ((cells.frame, frames.frame), (cells.box, frames.box),
+                                                             (cells.instance, frames.instance),
+                                                             (cells.take, frames.take), (cells.trim, frames.trim))))
 
 
 def _merge_map(nodes: pa.Table | None, n_instances: int) -> tuple[np.ndarray, np.ndarray]:

@@ -223,3 +223,33 @@ def test_arcade_cells_reach_labels(tmp_path, scan, monkeypatch):
     assert (want_cls[changed] == int(ClassId.ARCH)).all()
     np.testing.assert_array_equal(got["class"], want_cls)
     np.testing.assert_array_equal(got["instance"], want_inst)
+
+
+def test_frame_joins_reach_labels(tmp_path, scan, monkeypatch):
+    """A face that tree/frames.py joins to a passage is that instance in the labels, with
+    class arch, wall faces included; the frames' cells follow the rows' in tree/rows/cells."""
+    import tree.frames as tf
+    import tree.rows as tr
+    from pipeline.tree_stage import ROWS
+
+    tree = "{enabled: true, max_depth: 1}"
+    _, plain = _run(tmp_path / "plain", scan, tree=tree)
+    chosen: dict[str, int] = {}
+
+    def frames(arches, walls, skip):
+        chosen["wall"], chosen["into"] = sorted(walls)[0], sorted(walls)[1]
+        far = np.array([[1e4, 1e4, 1.0, 0.0]])  # a cell far away: it changes no point
+        cell = tr.ArcadeCells(far, np.array([[-1.0, 1.0, -1.0, 1.0, 0.0, 1.0]]),
+                              np.array([chosen["into"]]), np.array([1], np.int8), np.array([False]))
+        return cell, {chosen["wall"]: chosen["into"]}
+
+    monkeypatch.setattr(tf, "frame_cells", frames)
+    store, got = _run(tmp_path / "frames", scan, tree=tree)
+    assert tr.ArcadeCells.from_array(store.read_slice(ROWS)).instance[-1] == chosen["into"]
+    face = plain["instance"] == chosen["wall"]
+    assert face.sum() > 50
+    assert (plain["class"][face] == int(ClassId.WALL)).all()
+    assert (got["instance"][face] == chosen["into"]).all()
+    assert (got["class"][face] == int(ClassId.ARCH)).all()
+    rest = ~face & (plain["instance"] != chosen["into"])
+    np.testing.assert_array_equal(got["instance"][rest], plain["instance"][rest])
