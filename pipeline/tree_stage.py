@@ -68,7 +68,7 @@ DECISIONS = ("split-model", "energy")
 #: tree-v15: arcades are rows of bays (tree/rows.py: pieces take their piers, gaps get bays,
 #: end bays lose their end wall; tree/samples, tree/rows/cells), and MERGE_INTO_OVERLAP 0.5;
 #: tree-v16: frames (tree/frames.py: a portal's face joins its passage, a lone bay's
-#: intrados takes its piers; wall instances sampled too).
+#: intrados takes its piers and the opening beside them is a bay; wall instances sampled too).
 TREE_ALGORITHM = "tree-v16"
 #: Points sampled from each wall instance for the frames (tree/frames.py): a pier's face
 #: beside a bay's jamb is a strip a few tenths of a metre wide in a facade's wall.
@@ -522,7 +522,9 @@ def _arcade_rows(store: RunStore, n_batches: int, inst_offsets: np.ndarray, imap
     for j, i in absorbed.items():
         imap[imap == j] = i
     skip = set(cells.instance.tolist()) | set(absorbed)
-    frames, joined = frame_cells({i: v for i, v in samples[arch].items() if i not in skip}, samples[wall], skip)
+    next_id = max([int(inst_offsets[-1]) + 1, *(int(i) + 1 for i in cells.instance.tolist())])
+    frames, joined = frame_cells(samples[arch], samples[wall], skip,
+                                 next_id=next_id)
     for f, a in joined.items():
         members = np.flatnonzero(imap == f)
         imap[members] = a

@@ -236,7 +236,7 @@ def test_frame_joins_reach_labels(tmp_path, scan, monkeypatch):
     _, plain = _run(tmp_path / "plain", scan, tree=tree)
     chosen: dict[str, int] = {}
 
-    def frames(arches, walls, skip):
+    def frames(arches, walls, skip, next_id=None):
         chosen["wall"], chosen["into"] = sorted(walls)[0], sorted(walls)[1]
         far = np.array([[1e4, 1e4, 1.0, 0.0]])  # a cell far away: it changes no point
         cell = tr.ArcadeCells(far, np.array([[-1.0, 1.0, -1.0, 1.0, 0.0, 1.0]]),

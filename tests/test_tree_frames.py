@@ -83,6 +83,30 @@ def test_a_lone_piece_takes_half_its_piers():
     assert y[1] > THICK
 
 
+def test_the_next_opening_is_a_bay_a_shadow_is_not():
+    rng = np.random.default_rng(3)
+    ops = [(-2.2, 0.0, 4.8), (1.3, 3.5, 4.8)]
+    piece = _intrados(rng, -2.2, 0.0)
+    cells, _ = frame_cells(_s(a1=piece), _s(w5=_facade(rng, ops)), next_id=50)
+    assert cells.instance.tolist() == [1, 50]
+    o, u = cells.frame[1, :2], cells.frame[1, 2:]
+    t0, t1 = sorted(float(o @ u + t * np.sign(u[0])) for t in cells.box[1, :2])
+    # one pitch (opening 2.2 m and pier 1.3 m) from the middle of the pier
+    assert t0 == pytest.approx(0.65, abs=0.12)
+    assert t1 == pytest.approx(0.65 + 3.5, abs=0.15)
+    # no next bay without next_id, nor where an arch instance already has that bay
+    assert frame_cells(_s(a1=piece), _s(w5=_facade(rng, ops)))[0].instance.tolist() == [1]
+    there = _intrados(rng, 1.3, 3.5)
+    assert frame_cells(_s(a1=piece, a2=there), _s(w5=_facade(rng, ops)), skip={2}, next_id=50)[0].instance.tolist() == [1]
+    # two pieces with the bay between them missing: one next bay, not two
+    ops3 = [*ops, (4.8, 7.0, 4.8)]
+    two = frame_cells(_s(a1=piece, a3=_intrados(rng, 4.8, 7.0)), _s(w5=_facade(rng, ops3)), next_id=50)[0]
+    assert two.instance.tolist() == [1, 3, 50]
+    # a shadow (no wall over the break at any height) is no opening: no next bay
+    shadow = _facade(rng, [(-2.2, 0.0, 4.8), (1.3, 3.5, 9.0)])
+    assert frame_cells(_s(a1=piece), _s(w5=shadow), next_id=50)[0].instance.tolist() == [1]
+
+
 def test_a_door_a_whole_bay_and_a_row_member_stay():
     rng = np.random.default_rng(2)
     # a lone opening in a plain wall: no pier width to take

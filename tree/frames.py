@@ -1,4 +1,5 @@
-"""Frames: a portal's face joins its passage, a lone bay's piece takes its piers (tree-v16).
+"""Frames: a portal's face joins its passage, a lone bay's piece takes its piers and its
+neighbour bay (tree-v16).
 
 Two failures the rows (tree/rows.py) cannot reach, because they need a row of three:
 
@@ -31,6 +32,15 @@ Two failures the rows (tree/rows.py) cannot reach, because they need a row of th
    door in a wall gives no pier width). The cell takes the ``ROW_TAKE`` points (wall,
    other, pillar, dome) inside it, up to the piece's top, like a row's piece (the labels
    stage applies it, :func:`tree.rows.apply_cells`).
+3. **Next bays.** The break beside a lone piece's pier is the next bay's opening when the
+   wall shows over its first ``NEXT_REACH`` metres at the piece's top (``NEXT_TOP``,
+   ``NEXT_COVER``): a shadow (of a minaret in front of the facade) has no wall over it,
+   an opening has its arch and the wall band above. It gets a new instance with a cell one
+   pitch wide (the piece's opening and its pier) from the middle of that pier, taking the
+   same classes, unless an arch instance has ``NEXT_TAKEN`` of its points in the cell (the
+   bay is there already) or another piece's next bay lies there. Wazir Khan's inner
+   gateway bays stand behind the gateway's minarets: 80 of their 1 539 and 1 575 points
+   are intrados, the rest their faces in the facade's wall, and no instance had them.
 
 Not in the paper. Thresholds from the Wazir Khan reference stores (three seeds,
 docs/method.md gives the failure behind each). Pure NumPy.
@@ -71,6 +81,16 @@ SIDE = 0.3
 SIDE_POINTS = 3
 #: A break of the wall's lower band at least this long (m) is the next opening.
 GAP = 0.5
+#: The next bay: wall over the break (from this far below the piece's top to this far
+#: above it) in at least ``NEXT_COVER`` of its ``NEXT_BIN`` m bins ...
+NEXT_TOP = (0.6, 0.4)
+#: ... over its first ``NEXT_REACH`` metres makes the break an opening (a shadow beside
+#: the opening leaves its start seen; a shadow alone has no wall over it).
+NEXT_REACH = 1.0
+NEXT_BIN = 0.25
+NEXT_COVER = 0.5
+#: An arch instance with this share of its points in a next bay's cell is that bay already.
+NEXT_TAKEN = 0.3
 #: Widening (m) of a piece's cell across the wall, and below and above it.
 BAND_PAD = 0.2
 Z_PAD = (0.2, 0.05)
@@ -105,7 +125,8 @@ def _next_gap(t: npt.NDArray[np.float64], start: float, reach: float) -> float |
 
 def frame_cells(arches: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]],
                 walls: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]],
-                skip: set[int] | frozenset[int] = frozenset()) -> tuple[ArcadeCells, dict[int, int]]:
+                skip: set[int] | frozenset[int] = frozenset(), next_id: int | None = None
+                ) -> tuple[ArcadeCells, dict[int, int]]:
     """The faces that join their passages and the cells of lone pieces.
 
     Parameters
@@ -115,11 +136,13 @@ def frame_cells(arches: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]],
         the points each sampled point stands for (:func:`tree.rows.instance_sample`).
     skip : set of int
         Arch instances in a row (tree/rows.py): neither passages nor pieces.
+    next_id : int, optional
+        The id of the first next bay (new instances; none without it); the next ones follow.
 
     Returns
     -------
     cells : ArcadeCells
-        One `take` 1 cell per lone piece that takes its piers.
+        One `take` 1 cell per lone piece that takes its piers, then one per next bay.
     joined : dict
         ``face instance -> passage instance``; a face of class wall takes class arch.
 
@@ -170,6 +193,7 @@ def frame_cells(arches: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]],
                 joined[f] = a
     # 2. Lone pieces: jambs through the wall, pier faces in one wall instance on both sides.
     frames, boxes, ids = [], [], []
+    new_bays: list[tuple[int, np.ndarray, np.ndarray, tuple[float, float], tuple[float, float, float, float]]] = []
     for a in sorted(info):
         if a in joined or a in joined.values():
             continue
@@ -200,12 +224,53 @@ def frame_cells(arches: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]],
             half_r = 0.5 * (gap_r if gap_r is not None else gap_l)  # type: ignore[operator]
             half_l = 0.5 * (gap_l if gap_l is not None else gap_r)  # type: ignore[operator]
             best = (half_l, half_r)
+            if next_id is not None:
+                top = (qw > q0 - SIDE) & (qw < q1 + SIDE) & (pw[:, 2] > z1 - NEXT_TOP[0]) & (pw[:, 2] < z1 + NEXT_TOP[1])
+                for sign, gap, edge in ((1.0, gap_r, t1), (-1.0, gap_l, t0)):
+                    if gap is None:
+                        continue
+                    # the break's visible width, and wall over it at the piece's top: an opening
+                    g = sign * edge + gap
+                    after = np.sort(sign * tw[band])
+                    after = after[after > g + 1e-6]  # past the last point before the break
+                    seen = min(float(after[0]) - g if len(after) else opening, opening, NEXT_REACH)
+                    bins = np.arange(g, g + seen + 1e-9, NEXT_BIN)
+                    if len(bins) < 2:
+                        continue
+                    hit = np.histogram(sign * tw[top], bins)[0] > 0
+                    if hit.mean() < NEXT_COVER:
+                        continue
+                    lo = sign * edge + 0.5 * gap
+                    cell = (lo, lo + opening + gap) if sign > 0 else (-(lo + opening + gap), -lo)
+                    new_bays.append((a, o, u, cell, (q0 - BAND_PAD, q1 + BAND_PAD, z0 - Z_PAD[0], z1 + Z_PAD[1])))
             break
         if best is None:
             continue
         frames.append([float(o[0]), float(o[1]), float(u[0]), float(u[1])])
         boxes.append([t0 - best[0], t1 + best[1], q0 - BAND_PAD, q1 + BAND_PAD, z0 - Z_PAD[0], z1 + Z_PAD[1]])
         ids.append(a)
+    # 3. The next bays: an opening beside a lone piece's pier is a bay of the same pitch,
+    # unless an arch instance already stands in it (or a next bay found from another piece).
+    centres: list[np.ndarray] = []
+    for _a, o, u, (c0, c1), (b0, b1, h0, h1) in new_bays:
+        nrm = np.array([-u[1], u[0]])
+        mid = o + 0.5 * (c0 + c1) * u + 0.5 * (b0 + b1) * nrm
+        if any(float(np.linalg.norm(mid - c)) < 0.5 * (c1 - c0) for c in centres):
+            continue
+        taken = False
+        for _k, (pk, wk) in A.items():
+            tk, qk = _coords(pk, o, u)
+            inside = (tk >= c0) & (tk < c1) & (qk > b0) & (qk < b1) & (pk[:, 2] > h0) & (pk[:, 2] < h1)
+            if float(wk[inside].sum()) >= NEXT_TAKEN * float(wk.sum()):
+                taken = True
+                break
+        if taken:
+            continue
+        centres.append(mid)
+        frames.append([float(o[0]), float(o[1]), float(u[0]), float(u[1])])
+        boxes.append([c0, c1, b0, b1, h0, h1])
+        ids.append(int(next_id))  # type: ignore[arg-type]
+        next_id += 1  # type: ignore[operator]
     if not ids:
         return ArcadeCells.empty(), joined
     n = len(ids)
