@@ -523,8 +523,7 @@ def _arcade_rows(store: RunStore, n_batches: int, inst_offsets: np.ndarray, imap
         imap[imap == j] = i
     skip = set(cells.instance.tolist()) | set(absorbed)
     next_id = max([int(inst_offsets[-1]) + 1, *(int(i) + 1 for i in cells.instance.tolist())])
-    frames, joined = frame_cells(samples[arch], samples[wall], skip,
-                                 next_id=next_id)
+    frames, joined = frame_cells(samples[arch], samples[wall], skip, next_id=next_id)
     for f, a in joined.items():
         members = np.flatnonzero(imap == f)
         imap[members] = a

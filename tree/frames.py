@@ -198,8 +198,7 @@ def frame_cells(arches: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]],
         if a in joined or a in joined.values():
             continue
         o, u, t, q, (t0, t1, q0, q1, z0, z1) = info[a]
-        _, wa = A[a]
-        pa = A[a][0]
+        pa, wa = A[a]
         low = pa[:, 2] < z0 + LOW * (z1 - z0)
         if q1 - q0 < PIECE_DEPTH or not low.any():
             continue
