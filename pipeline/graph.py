@@ -110,7 +110,10 @@ def fresh_workers(runner: Runner) -> None:
 
     What a stage leaves in a worker it does not hand back: the tree stage imports torch
     and loads HollowNet, about 0.5 GB that a labels task would otherwise carry on top of
-    its own working set (docs/benchmarks.md, "End to end"). Takes a few seconds.
+    its own working set, and the ingest's and coarse stage's heaps are not all handed back
+    by ``malloc_trim`` (a coarse task peaked 70-120 MB higher, a tree task 150-250 MB
+    higher, in workers that had run the stage before; docs/benchmarks.md, "End to end").
+    ``hollowtree run`` calls it after every stage that ran tasks. Takes about 1.4 s.
     """
     restart = getattr(runner, "restart_workers", None)
     if restart is not None:

@@ -171,12 +171,16 @@ def run_workflow(
                                 f"{rep.maps_run} run, {rep.maps_skipped} skipped; tiles {rep.tiles_run} run, "
                                 f"{rep.tiles_skipped} skipped")
             say(report.lines[-1])
+            if rep.maps_run or rep.tiles_run:  # what the ingest's readers and writers left
+                fresh_workers(runner)
             crep = run_coarse(url, coarse_params, runner=runner)
             report.lines.append(f"coarse: {crep.n_segments:,} segments; tiles {crep.tiles_run} run, "
                                 f"{crep.tiles_skipped} skipped; DBSCAN eps {crep.eps:.3f} m; "
                                 f"{crep.seconds:.1f} s (stitch {crep.stitch_seconds:.1f} s)")
             say(report.lines[-1])
             use_tree = wf.tree.enabled
+            if use_tree and crep.tiles_run:  # the coarse tasks' heaps, before torch and HollowNet
+                fresh_workers(runner)
             if use_tree:
                 from pipeline.tree_stage import TreeStageParams, run_tree
 

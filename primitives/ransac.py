@@ -360,6 +360,8 @@ def _blocks(rows: npt.NDArray[np.int64], n_points: int) -> Iterator[tuple[npt.ND
 class _Search:
     """The state of one run: live points, octree order, subsets and the candidate pool."""
 
+    Cl: PointColumns  # the live points, subset by subset (``_new_subsets``)
+
     def __init__(self, P: F64, N: F64, *, kinds: tuple[str, ...], epsilon: float, alpha_deg: float,
                  cluster_epsilon: float, min_support: int, rng: np.random.Generator) -> None:
         self.P, self.N, self.kinds, self.rng = P, N, kinds, rng
@@ -368,8 +370,6 @@ class _Search:
         m = len(P)
         self.alive = np.ones(m, dtype=bool)
         self.n_alive = m
-        self.pp = np.einsum("ij,ij->i", P, P)
-        self.npx = np.einsum("ij,ij->i", N, P)
         self.k = max(MINIMAL_SET_SIZE[k] for k in kinds)
         # Octree as one Morton order: every cell of every level is a contiguous run.
         lo = P.min(axis=0)
@@ -413,9 +413,19 @@ class _Search:
             bounds.append(min(len(perm), bounds[-1] + max(FIRST_SUBSET, bounds[-1])))
         self.sub_bounds = np.asarray(bounds, dtype=np.int64)
         self.live = perm
-        P, N = self.P, self.N
-        self.Cl = PointColumns(*(np.ascontiguousarray(c[perm]) for c in (P[:, 0], P[:, 1], P[:, 2], N[:, 0],
-                                                                         N[:, 1], N[:, 2], self.pp, self.npx)))
+        # Memory: the old columns go first, the rows are gathered once each, and |x|^2 and
+        # n . x are taken on the gathered rows (the same row-wise products as on all points,
+        # so the same values) rather than kept for every point.
+        self.Cl = None  # type: ignore[assignment]
+        P = self.P[perm]
+        pp = np.einsum("ij,ij->i", P, P)
+        x, y, z = (np.ascontiguousarray(P[:, j]) for j in range(3))
+        N = self.N[perm]
+        npx = np.einsum("ij,ij->i", N, P)
+        del P
+        nx, ny, nz = (np.ascontiguousarray(N[:, j]) for j in range(3))
+        del N
+        self.Cl = PointColumns(x, y, z, nx, ny, nz, pp, npx)
         self.n_at_subsets = self.n_alive
 
     @property
@@ -641,7 +651,12 @@ class _Search:
         self.order, self.codes = self.order[keep], self.codes[keep]
         keep = self.alive[self.live]
         self.live = self.live[keep]
-        self.Cl = self.Cl.take(keep)
+        cols = list(self.Cl.columns())
+        self.Cl = None  # type: ignore[assignment]
+        for i, c in enumerate(cols):  # one column at a time: 8 bytes a point at once, not 64
+            cols[i] = c[keep]
+        self.Cl = PointColumns(*cols)
+        del cols
         self.sub_bounds = np.concatenate(([0], np.cumsum(keep)))[self.sub_bounds]
         self.level_score *= 0.5
         self.templates = []
@@ -723,9 +738,12 @@ def efficient_ransac(
 
     Notes
     -----
-    Memory: ``O(n_points)`` for the point copies, the Morton order and the subsets (about
-    100 bytes per point), plus ``CHUNK_ELEMENTS`` (2 M) float64 elements per scoring block
-    and one bitmap of at most 4 cells per inlier.
+    Memory: ``O(n_points)``, about 150 bytes per point searched: the centred points and
+    unit normals (48), the Morton order (16), the subsets' columns (64: points, normals,
+    ``|x|^2`` and ``n . x``, the last two taken per layout rather than kept for every point),
+    the live list and the labels (16); the inputs are not copied beyond that, and a row
+    index is kept only when some points are left out. Plus ``CHUNK_ELEMENTS`` (2 M)
+    float64 elements per scoring block and one bitmap of at most 4 cells per inlier.
 
     Examples
     --------
@@ -756,6 +774,9 @@ def efficient_ransac(
     centre = xyz[idx].mean(axis=0)
     P = xyz[idx] - centre
     N = normals[idx] / norm[idx, None]
+    # Every point searched (the usual case): the labels need no row index (8 bytes a point).
+    rows: npt.NDArray[np.int64] | None = None if len(idx) == n else idx
+    del norm, ok, idx
     spread = np.sqrt(np.maximum(np.linalg.eigvalsh(np.cov(P.T)), 0.0))
     if spread[-1] < 0.1 * epsilon:
         return _empty(n, "all points are identical (within epsilon / 10)")
@@ -814,6 +835,10 @@ def efficient_ransac(
             logger.debug("extracted %s with %d points after %d minimal sets", kind, len(inl), drawn)
             extracted = True
         batch = FIRST_BATCH if extracted else min(2 * batch, MAX_BATCH)
-    labels = np.full(n, -1, dtype=np.int64)
-    labels[idx] = local_labels
+    del search
+    if rows is None:
+        labels = local_labels
+    else:
+        labels = np.full(n, -1, dtype=np.int64)
+        labels[rows] = local_labels
     return RansacResult(labels=labels, primitives=tuple(fits), n_candidates=drawn, stop_reason=reason)

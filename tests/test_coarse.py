@@ -461,3 +461,32 @@ def test_interrupted_block_tasks_resume(scan, tmp_path):
     assert not any(fn is plan_blocks for fn, _, _ in calls)
     assert sum(is_block(a, d) for _, a, d in calls) == n_blocks - 3
     assert np.array_equal(_labels(scan, store), whole)
+
+
+def test_segment_points_holds_no_copy_of_the_points():
+    """A tile's points and normals go to Efficient RANSAC as they are (a point without a
+    normal has a zero one, which RANSAC leaves out) and the curvature is dropped first:
+    traced peak under 330 bytes per point on 200 k points, against 339 when the points
+    with a normal were copied for the search (383 before primitives.ransac's own cut;
+    283 now)."""
+    import tracemalloc
+
+    from pipeline.coarse import _segment_points
+
+    rng = np.random.default_rng(0)
+    n = 200_000
+    a = rng.random((n, 2)) * 10
+    k = rng.integers(0, 3, n)
+    zero = np.zeros(n)
+    xyz = np.where((k == 0)[:, None], np.c_[a, zero], np.where((k == 1)[:, None], np.c_[a[:, 0], zero, a[:, 1]],
+                                                                np.c_[zero, a[:, 0], a[:, 1]]))
+    xyz += rng.normal(0, 0.003, xyz.shape)
+    tracemalloc.start()
+    try:
+        segment, fits, _ = _segment_points(xyz, CoarseParams(sparse_factor=0), 0.1, np.random.default_rng(0))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert [f["kind"] for f in fits] == ["plane"] * 3
+    assert adjusted_rand_score(k, segment) > 0.95
+    assert peak / n < 330, f"{peak / n:.0f} bytes per point"

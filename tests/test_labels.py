@@ -253,3 +253,22 @@ def test_frame_joins_reach_labels(tmp_path, scan, monkeypatch):
     assert (got["class"][face] == int(ClassId.ARCH)).all()
     rest = ~face & (plain["instance"] != chosen["into"])
     np.testing.assert_array_equal(got["instance"][rest], plain["instance"][rest])
+
+
+def test_workers_are_replaced_after_each_stage_that_ran_tasks(tmp_path, scan, monkeypatch):
+    """``hollowtree run`` hands each stage fresh workers: after the ingest, the coarse
+    stage and the tree when they ran tasks, never after a stage the store already
+    records (a rerun with another tree parameter replaces them after the tree only)."""
+    import pipeline.graph
+
+    calls: list[int] = []
+    monkeypatch.setattr(pipeline.graph, "fresh_workers", lambda runner: calls.append(1))
+    tree = "{batch_points: 40000}"
+    _run(tmp_path, scan, tree=tree)
+    assert len(calls) == 3
+    calls.clear()
+    _run(tmp_path, scan, tree="{batch_points: 40000, max_depth: 2}")
+    assert len(calls) == 1
+    calls.clear()
+    _run(tmp_path, scan, tree="{enabled: false}")  # labels only: no stage before it ran tasks
+    assert calls == []
