@@ -234,7 +234,7 @@ def _segment_points(xyz: np.ndarray, params: CoarseParams, eps: float, rng: np.r
     normal.
     """
     n = len(xyz)
-    labels = np.full(n, -1, dtype=np.int64)
+    labels: np.ndarray | None = None  # made after the search where it found nothing to label
     prims: tuple[Any, ...] = ()
     no_normal = np.zeros(n, dtype=bool)
     if n:
@@ -250,6 +250,8 @@ def _segment_points(xyz: np.ndarray, params: CoarseParams, eps: float, rng: np.r
             labels = res.labels
             prims = res.primitives
         del normals
+    if labels is None:
+        labels = np.full(n, -1, dtype=np.int64)
     free = len(prims)  # the group of points no primitive explains
     groups = np.where(labels < 0, free if params.free_segments else -1, labels)
     segment = dbscan_segments(xyz, groups, eps=eps, min_samples=params.min_samples) if n else np.zeros(0, np.int64)

@@ -468,7 +468,7 @@ def test_segment_points_holds_no_copy_of_the_points():
     normal has a zero one, which RANSAC leaves out) and the curvature is dropped first:
     traced peak under 330 bytes per point on 200 k points, against 339 when the points
     with a normal were copied for the search (383 before primitives.ransac's own cut;
-    283 now)."""
+    275 now)."""
     import tracemalloc
 
     from pipeline.coarse import _segment_points
