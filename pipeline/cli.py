@@ -172,7 +172,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="leave points that no primitive explains unsegmented (default: DBSCAN them too)")
     c.add_argument("--free-min-points", type=_positive_int, default=200,
                    help="smallest free segment, points (default 200)")
-    c.add_argument("--block-points", type=_nonnegative_int, default=3_000_000,
+    c.add_argument("--block-points", type=_nonnegative_int, default=2_200_000,
                    help="segment tiles with more points in x-y blocks of at most this many, each a "
                         "task, joined like tiles (default 3,000,000; 0 = never)")
     c.add_argument("--block-margin", type=_float, default=None,

@@ -113,25 +113,44 @@ def fresh_workers(runner: Runner) -> None:
     its own working set, and the ingest's and coarse stage's heaps are not all handed back
     by ``malloc_trim`` (a coarse task peaked 70-120 MB higher, a tree task 150-250 MB
     higher, in workers that had run the stage before; docs/benchmarks.md, "End to end").
-    ``hollowtree run`` calls it after every stage that ran tasks. Takes about 1.4 s.
+    ``hollowtree run`` calls it after every stage that ran tasks. Takes about 1.4 s
+    (a new local cluster, :class:`_LocalClient`).
     """
     restart = getattr(runner, "restart_workers", None)
     if restart is not None:
         restart()
 
 
-def _restart_quietly(client: Any) -> None:
-    """``client.restart()`` without the nannies' "Restarting worker" warnings (an expected
-    restart, not a failure)."""
-    loggers = [logging.getLogger(n) for n in ("distributed.nanny", "distributed.scheduler", "distributed.core")]
-    levels = [lg.level for lg in loggers]
-    for lg in loggers:
-        lg.setLevel(logging.ERROR)
-    try:
-        client.restart(wait_for_workers=True)
-    finally:
-        for lg, level in zip(loggers, levels, strict=True):
-            lg.setLevel(level)
+class _LocalClient:
+    """A local cluster of this command and its client; :meth:`renew` replaces both, so the
+    next stage runs in new worker processes.
+
+    A new cluster rather than ``client.restart()``: a nanny restart once left a
+    ``hollowtree run`` waiting 120 s for workers that never came back and then failed
+    (2026-11-26, a 1 M-point benchmark run); closing a cluster and starting one takes
+    about as long as a restart (1.3-1.5 s) and has no such wait.
+    """
+
+    def __init__(self, workers: int, processes: bool) -> None:
+        self.workers, self.processes = workers, processes
+        self._start()
+
+    def _start(self) -> None:
+        from distributed import Client, LocalCluster
+
+        self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=self.processes,
+                                    dashboard_address=":0", silence_logs=logging.ERROR)
+        self.client = Client(self.cluster)
+
+    def renew(self) -> None:
+        self.close()
+        self._start()
+
+    def close(self) -> None:
+        try:
+            self.client.close()
+        finally:
+            self.cluster.close()
 
 
 def _bar(total: int, desc: str, progress: bool) -> tqdm:
@@ -151,12 +170,13 @@ def _sync_runner(progress: bool) -> Runner:
     return run
 
 
-def _client_runner(client: Any, progress: bool) -> Runner:
+def _client_runner(client_of: Callable[[], Any], progress: bool) -> Runner:
     from distributed import as_completed
 
     def run(fn: Callable[..., Any], args_list: Sequence[tuple[Any, ...]], desc: str) -> list[Any]:
         if not args_list:
             return []
+        client = client_of()  # the local cluster's current client (fresh_workers renews it)
         name = getattr(fn, "__name__", "task")  # the dashboard shows the stage's function
         futures = [client.submit(_run_and_trim, fn, *args, key=f"{name}-{uuid.uuid4().hex}")
                    for args in args_list]
@@ -187,7 +207,7 @@ def task_runner(
         yield _sync_runner(progress)
         return
     import dask
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
     # distributed sets its loggers to INFO when imported; keep them quiet unless the
     # command runs with --verbose (root logger at DEBUG).
@@ -201,18 +221,19 @@ def task_runner(
         # sampling every worker thread every 10 ms there.
         quiet = contextlib.nullcontext() if processes else dask.config.set(
             {"distributed.worker.profile.enabled": False})
-        with quiet, dask.config.set(_LOCAL_WORKER_CONFIG), LocalCluster(
-            n_workers=workers, threads_per_worker=1, processes=processes,
-            dashboard_address=":0", silence_logs=logging.ERROR,
-        ) as cluster, Client(cluster) as client:
-            if progress:
-                print(f"dask dashboard: {client.dashboard_link}", file=sys.stderr)
-            run = _client_runner(client, progress)
-            if processes:  # our own worker processes: fresh_workers may replace them
-                run.restart_workers = lambda: _restart_quietly(client)  # type: ignore[attr-defined]
-            yield run
+        with quiet, dask.config.set(_LOCAL_WORKER_CONFIG):
+            local = _LocalClient(workers, processes)
+            try:
+                if progress:
+                    print(f"dask dashboard: {local.client.dashboard_link}", file=sys.stderr)
+                run = _client_runner(lambda: local.client, progress)
+                if processes:  # our own worker processes: fresh_workers may replace them
+                    run.restart_workers = local.renew  # type: ignore[attr-defined]
+                yield run
+            finally:
+                local.close()
         return
     with Client(scheduler, timeout="10s") as client:
         if progress:
             print(f"dask dashboard: {client.dashboard_link}", file=sys.stderr)
-        yield _client_runner(client, progress)
+        yield _client_runner(lambda: client, progress)

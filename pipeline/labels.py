@@ -5,11 +5,12 @@ Two phases of Dask tasks, each unit recorded after its data like every other sta
 1. ``labels: tiles`` (one task per tile): the tile's core rows get their coarse primitive
    and global segment (coarse stage) and their tree leaf, class, instance and score (tree
    stage, found through the row's CSR position); points dropped by voxel downsampling take
-   their representative's labels (the representative is a core row of the same tile).
-   The points are written as parts of at most ``PART_ROWS`` points, each sorted by
-   original index (``labels/parts/<tile>/<j>``), so the task's memory does not grow with
-   the tile; the record keeps, for every part and output range, which rows of the part
-   fall in it.
+   their representative's labels (the representative is a core row of the same tile),
+   looked up in the core rows' parts, two parts held at a time. The points are written as
+   parts of at most ``PART_ROWS`` points, each sorted by original index
+   (``labels/parts/<tile>/<j>``: first the core rows', then the dropped points'), so the
+   task's memory does not grow with the tile; the record keeps, for every part and output
+   range, which rows of the part fall in it.
 2. ``labels: ranges`` (one task per range of ``RANGE_ROWS`` input points, whole chunks):
    the parts' rows of the range are gathered and written to ``labels/<name>`` at their
    original index. Ranges never share a chunk, so tasks never race.
@@ -31,6 +32,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
 
@@ -50,7 +52,9 @@ TILE_STAGE = "labels_tiles"
 STAGE = "labels"
 RANGE_ROWS = 4 * CHUNK_POINTS
 #: Points of a tile labelled (and written as one part) at a time: the tile task's memory
-#: follows this, not the tile's size nor the points its voxels dropped.
+#: follows this, not the tile's size nor the points its voxels dropped. At least the
+#: ingest's batch (``tiling.ingest.FLUSH_ROWS``), so that a run of dropped points finds its
+#: representatives in one or two parts (:class:`_KeptParts`).
 PART_ROWS = 2_000_000
 #: ``segment = global coarse segment << LEAF_BITS | tree leaf node id``.
 LEAF_BITS = 20
@@ -162,26 +166,66 @@ def _write_part(store: RunStore, tile: int, j: int, index: np.ndarray, values: d
     return part, {"n": int(len(part["index"])), "ranges": ranges}
 
 
-def _kept_labels(store: RunStore, tile: int, n_rows: int, cfg: dict[str, Any]
-                 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """Original index and labels of every core row of a tile, read ``PART_ROWS`` rows at a
-    time: only the compact result (26 bytes per point) is held for the whole tile."""
-    got = [_core_labels(store, tile, start, min(start + PART_ROWS, n_rows), cfg)
-           for start in range(0, max(n_rows, 1), PART_ROWS)]
-    index = np.concatenate([g[0] for g in got])
-    values = {k: np.concatenate([g[1].pop(k) for g in got]) for k in LABEL_DTYPES}
-    return index, values
+class _KeptParts:
+    """The labels of a tile's kept core points, looked up by original index in the tile's
+    first parts (each sorted by index): at most two parts are held at a time.
+
+    The ingest writes a tile batch by batch, each batch's kept rows and its dropped points
+    (``voxel_dropped``, with their representatives among that batch's rows) together, so
+    consecutive dropped points find their representatives in consecutive parts: a search
+    starts one part before the last part that answered and goes on from there, wrapping
+    round to the first part (any order is correct; this one reads each part about once).
+    """
+
+    def __init__(self, store: RunStore, tile: int, n_parts: int) -> None:
+        self.store, self.tile, self.n_parts = store, tile, n_parts
+        self.held: OrderedDict[int, dict[str, np.ndarray]] = OrderedDict()
+        self.last = 0
+
+    def _part(self, j: int) -> dict[str, np.ndarray]:
+        if j in self.held:
+            self.held.move_to_end(j)
+        else:
+            while len(self.held) >= 2:
+                self.held.popitem(last=False)
+            group = f"labels/parts/{self.tile}/{j}"
+            self.held[j] = {k: self.store.read_slice(f"{group}/{k}") for k in ("index", *LABEL_DTYPES)}
+        return self.held[j]
+
+    def labels_of(self, rep: np.ndarray) -> dict[str, np.ndarray]:
+        """Labels of the kept points with original index ``rep`` (every one must be there)."""
+        out = {k: np.zeros(len(rep), dtype=dt) for k, dt in LABEL_DTYPES.items()}
+        need = np.ones(len(rep), dtype=bool)
+        first = max(self.last - 1, 0)
+        for j in [*range(first, self.n_parts), *range(first)]:
+            if not need.any():
+                break
+            part = self._part(j)
+            if not len(part["index"]):
+                continue
+            sel = np.flatnonzero(need)
+            q = rep[sel]
+            at = np.minimum(np.searchsorted(part["index"], q), len(part["index"]) - 1)
+            hit = part["index"][at] == q
+            if hit.any():
+                sel, at = sel[hit], at[hit]
+                for k in LABEL_DTYPES:
+                    out[k][sel] = part[k][at]
+                need[sel] = False
+                self.last = j
+        if need.any():
+            raise PipelineError(f"store {self.store.url}: tile {self.tile} has dropped points without their "
+                                "representative")
+        return out
 
 
 def labels_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, Any]:
     """Dask task: the labels of one tile's core points (and of their dropped neighbours).
 
     Written as parts of at most ``PART_ROWS`` points (``labels/parts/<tile>/<j>``), so the
-    task's memory follows that, not the tile. Without voxels the parts are runs of the
-    tile's rows; with voxels part 0 holds every kept core point (the voxel grid bounds
-    them; they are labelled ``PART_ROWS`` rows at a time and only their compact labels are
-    held, :func:`_kept_labels`) and the next parts the dropped points, ``PART_ROWS`` at a
-    time, each taking its representative's labels from part 0.
+    task's memory follows that, not the tile: first the tile's core rows, ``PART_ROWS``
+    rows at a time; then, with voxels, the dropped points, ``PART_ROWS`` at a time, each
+    taking its representative's labels from the first parts (:class:`_KeptParts`).
     """
     store = RunStore.open(url, mode="a")
     if store.has(f"labels/parts/{tile}"):  # an interrupted attempt, or another labels run
@@ -189,25 +233,18 @@ def labels_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, Any]:
     n_rows = store.array_length(f"tiles/{tile}/index")
     n_dropped = store.array_length(f"tiles/{tile}/voxel_dropped") if store.has(f"tiles/{tile}/voxel_dropped") else 0
     parts = []
-    kept: dict[str, np.ndarray] = {}
-    if n_dropped:
-        index, values = _kept_labels(store, tile, n_rows, cfg)
-        kept, info = _write_part(store, tile, 0, index, values, cfg["n_points"])
+    for start in range(0, max(n_rows, 1), PART_ROWS):
+        index, values = _core_labels(store, tile, start, min(start + PART_ROWS, n_rows), cfg)
+        _, info = _write_part(store, tile, len(parts), index, values, cfg["n_points"])
         parts.append(info)
-    else:
-        for start in range(0, max(n_rows, 1), PART_ROWS):
-            index, values = _core_labels(store, tile, start, min(start + PART_ROWS, n_rows), cfg)
-            _, info = _write_part(store, tile, len(parts), index, values, cfg["n_points"])
-            parts.append(info)
+    kept = _KeptParts(store, tile, len(parts))
     for start in range(0, n_dropped, PART_ROWS):
         stop = min(start + PART_ROWS, n_dropped)
-        dropped = store.read_slice(f"tiles/{tile}/voxel_dropped", start, stop)
         rep = store.read_slice(f"tiles/{tile}/voxel_representative", start, stop)
-        at = np.minimum(np.searchsorted(kept["index"], rep), max(len(kept["index"]) - 1, 0))
-        if not len(kept["index"]) or not (kept["index"][at] == rep).all():
-            raise PipelineError(f"store {url}: tile {tile} has dropped points without their representative")
-        _, info = _write_part(store, tile, len(parts), dropped, {k: kept[k][at] for k in LABEL_DTYPES},
-                              cfg["n_points"])
+        values = kept.labels_of(rep)
+        del rep
+        dropped = store.read_slice(f"tiles/{tile}/voxel_dropped", start, stop)
+        _, info = _write_part(store, tile, len(parts), dropped, values, cfg["n_points"])
         parts.append(info)
     info = {"params_hash": cfg["params_hash"], "n_points": int(sum(p["n"] for p in parts)), "parts": parts}
     store.record(TILE_STAGE, str(tile), info)

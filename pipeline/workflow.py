@@ -111,7 +111,7 @@ class CoarseSection(_Section):
     free_min_points: PosInt = Field(200, description="smallest free segment, points")
     seed: int = Field(0, description="base seed; tile t uses [seed, t]")
     block_points: Annotated[int, Field(ge=0)] = Field(
-        3_000_000, description="tiles with more points are segmented in blocks of at most this many, each a task; "
+        2_200_000, description="tiles with more points are segmented in blocks of at most this many, each a task; "
                                "0 = never")
     block_margin: PosFloat | None = Field(
         None, description="context around a block, metres; null = min(ingest buffer, 2 x eps)")

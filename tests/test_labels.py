@@ -272,3 +272,76 @@ def test_workers_are_replaced_after_each_stage_that_ran_tasks(tmp_path, scan, mo
     calls.clear()
     _run(tmp_path, scan, tree="{enabled: false}")  # labels only: no stage before it ran tasks
     assert calls == []
+
+
+def _kept_store(tmp_path, parts):
+    store = RunStore.create(tmp_path / "k.zarr", attrs={})
+    for j, index in enumerate(parts):
+        index = np.sort(np.asarray(index, dtype=np.uint64))
+        store.write_unit(f"labels/parts/3/{j}", {"index": index, **{
+            k: (index * 7 % 251).astype(dt) for k, dt in LABEL_DTYPES.items()}})
+    return store
+
+
+def test_representatives_are_found_in_any_part_two_parts_held(tmp_path, monkeypatch):
+    """The dropped points' lookup (labels._KeptParts) finds a representative in whichever
+    part holds it, also behind the last part that answered, holds at most two parts, and
+    names the tile when one is missing."""
+    from pipeline.labels import _KeptParts
+    from tiling.errors import PipelineError
+
+    rng = np.random.default_rng(0)
+    index = rng.permutation(10_000).astype(np.uint64)
+    store = _kept_store(tmp_path, [index[a:a + 2_000] for a in range(0, 10_000, 2_000)] + [[]])
+    kept = _KeptParts(store, 3, 6)
+    loads = []
+    original = _KeptParts._part
+
+    def counted(self, j):
+        loads.append(j not in self.held)
+        out = original(self, j)
+        assert len(self.held) <= 2
+        return out
+
+    monkeypatch.setattr(_KeptParts, "_part", counted)
+    for reps in (index[4_100:4_600], index[8_500:9_000], index[:300], rng.choice(index, 3_000)):
+        got = kept.labels_of(reps)
+        for k, dt in LABEL_DTYPES.items():
+            np.testing.assert_array_equal(got[k], (reps * 7 % 251).astype(dt), err_msg=k)
+    # Consecutive representatives in one part: that part is read once and answers alone.
+    loads.clear()
+    kept.labels_of(index[6_100:6_200])
+    kept.labels_of(index[6_300:6_400])
+    assert sum(loads) <= 2
+    with pytest.raises(PipelineError, match="tile 3 has dropped points without their representative"):
+        kept.labels_of(np.array([10_000_001], np.uint64))
+
+
+def test_labels_task_reads_each_kept_part_about_once(tmp_path, scan, monkeypatch):
+    """With voxels, a tile's dropped points look their representatives up part by part in
+    the order the ingest wrote them: part loads stay near one per kept part and dropped
+    part, not their product (memory: two kept parts and one dropped part at a time). This
+    holds while a part is no shorter than an ingest batch (labels.PART_ROWS >= ingest.FLUSH_ROWS)."""
+    import pipeline.labels as labels
+
+    loads: list[int] = []
+    original = labels._KeptParts._part
+
+    def counted(self, j):
+        if j not in self.held:
+            loads.append(j)
+        return original(self, j)
+
+    import tiling.ingest as ingest
+
+    monkeypatch.setattr(labels, "PART_ROWS", 1_500)
+    monkeypatch.setattr(ingest, "FLUSH_ROWS", 1_500)  # the ingest's batches, as in a large tile
+    monkeypatch.setattr(labels._KeptParts, "_part", counted)
+    store, _ = _run(tmp_path, scan, ingest="{tile_size: 50.0, voxel: 0.2}")
+    n_kept = n_dropped = 0
+    for t in store.attrs["ingest"]["tiles"]:
+        n_kept += -(-store.array_length(f"tiles/{t}/index") // 1_500)
+        n_dropped += -(-store.array_length(f"tiles/{t}/voxel_dropped") // 1_500)
+    assert n_dropped > 4
+    assert n_kept > 4
+    assert len(loads) <= n_kept + n_dropped

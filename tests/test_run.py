@@ -281,6 +281,14 @@ def test_store_on_s3_moto_server(reference, scan, tmp_path, monkeypatch):
         server.wait()
 
 
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
 def test_fresh_workers_replaces_only_our_own_worker_processes():
     """After the tree stage the run replaces its local cluster's workers (torch and
     HollowNet stay in a worker otherwise); the in-process runner has none to replace."""
@@ -293,5 +301,9 @@ def test_fresh_workers_replaces_only_our_own_worker_processes():
         before = run(os.getpid, [()], "pid")
         fresh_workers(run)
         after = run(os.getpid, [()], "pid")
-    assert before != after
+        fresh_workers(run)  # a second time too (a new local cluster each time)
+        again = run(os.getpid, [()], "pid")
+        assert not _alive(before[0])
+        assert not _alive(after[0])
+    assert len({*before, *after, *again}) == 3
     assert os.getpid() not in before + after
