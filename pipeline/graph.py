@@ -113,7 +113,7 @@ def fresh_workers(runner: Runner) -> None:
     its own working set, and the ingest's and coarse stage's heaps are not all handed back
     by ``malloc_trim`` (a coarse task peaked 70-120 MB higher, a tree task 150-250 MB
     higher, in workers that had run the stage before; docs/benchmarks.md, "End to end").
-    ``hollowtree run`` calls it after every stage that ran tasks. Takes about 1.4 s
+    ``hollowtree run`` calls it after every stage that ran tasks. Takes 1.1-1.4 s
     (a new local cluster, :class:`_LocalClient`).
     """
     restart = getattr(runner, "restart_workers", None)
@@ -128,7 +128,7 @@ class _LocalClient:
     A new cluster rather than ``client.restart()``: a nanny restart once left a
     ``hollowtree run`` waiting 120 s for workers that never came back and then failed
     (2026-11-26, a 1 M-point benchmark run); closing a cluster and starting one takes
-    about as long as a restart (1.3-1.5 s) and has no such wait.
+    about as long as a restart (1.1-1.3 s, measured three times) and has no such wait.
     """
 
     def __init__(self, workers: int, processes: bool) -> None:
