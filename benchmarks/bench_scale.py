@@ -10,8 +10,12 @@ memory of the largest single process, of all processes together and of the drive
 the issue's two ratios, measured side by side in this one run:
 
 - time per point at the largest size over time per point at the smallest (linear = 1);
-- peak single-process memory at the largest size over that at the second largest
-  (flat = 1).
+- peak single-process memory at each size over that at the size before it, the smallest
+  left out (flat = 1; ``--sizes 1e6 1e7 1e8`` prints 100 M over 10 M).
+
+A "process" is a worker with the task it runs: a task's child process forked from its
+worker (``pipeline.graph.in_child``) counts with the worker, as its own pages (USS) on top
+of the worker's resident memory (``_procs.tree_rss``).
 
 Run: ``python benchmarks/bench_scale.py [--sizes 1e6 1e7 1e8] [--workflow workflows/local.yaml]
 [--set key=value ...] [--json FILE]``. Scans are cached in ``out/`` by the workflow's
@@ -143,9 +147,13 @@ def main() -> None:
         a, b = results[0], results[-1]
         lin = (b["wall_s"] / b["points"]) / (a["wall_s"] / a["points"])
         print(f"time per point, {b['points']:,} over {a['points']:,}: {lin:.2f} (linear = 1)")
-        c = results[-2]
-        pk = max(x["peak_process"] for x in b["stages"]) / max(x["peak_process"] for x in c["stages"])
-        print(f"peak single-process memory, {b['points']:,} over {c['points']:,}: {pk:.2f} (flat = 1)")
+        for c, b in zip(results[1:-1], results[2:], strict=True):  # each size over the one before (the smallest left out)
+            pk = max(x["peak_process"] for x in b["stages"]) / max(x["peak_process"] for x in c["stages"])
+            print(f"peak single-process memory, {b['points']:,} over {c['points']:,}: {pk:.2f} (flat = 1)")
+        if len(results) == 2:
+            c, b = results
+            pk = max(x["peak_process"] for x in b["stages"]) / max(x["peak_process"] for x in c["stages"])
+            print(f"peak single-process memory, {b['points']:,} over {c['points']:,}: {pk:.2f} (flat = 1)")
     if args.json:
         args.json.write_text(json.dumps({"cores": cores, "results": results}, indent=1))
 

@@ -31,6 +31,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from pipeline.graph import in_child
 from primitives.blocks import block_context, split_blocks
 from primitives.dbscan import dbscan_segments, sparse_points, window_spacing
 from primitives.group import (
@@ -42,6 +43,7 @@ from primitives.group import (
 )
 from primitives.normals import estimate_normals
 from primitives.ransac import RansacParams, efficient_ransac
+from primitives.score import load_kernels
 from primitives.stitch import UnionFind
 from tiling.errors import ConfigError, PipelineError
 from tiling.grid import TileGrid
@@ -1225,15 +1227,17 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     planned = {k: int(v["n_blocks"]) for k, v in store.records(PLAN_STAGE).items() if v.get("params_hash") == h}
     n_blocks = {t: planned[str(t)] for t in big if str(t) in planned}
     unplanned = sorted((t for t in big if t not in n_blocks), key=lambda t: -size[t])
-    n_blocks.update(zip(unplanned, runner(plan_blocks, [(url, t, cfg) for t in unplanned], "coarse: blocks"),
-                        strict=True))
+    # Each task in a child process of its worker (in_child): a worker's heap would keep
+    # what its earlier tasks left, and a later task peak 80-90 MB above the first.
+    n_blocks.update(zip(unplanned, runner(in_child(plan_blocks), [(url, t, cfg) for t in unplanned],
+                                          "coarse: blocks"), strict=True))
     blocks_done = {k for k, v in store.records(BLOCK_STAGE).items() if v.get("params_hash") == h}
     units = [(size[t], t, -1) for t in todo if t not in n_blocks]
     units += [(size[t] / n_blocks[t], t, b) for t in big for b in range(n_blocks[t]) if f"{t}.{b}" not in blocks_done]
     units.sort(key=lambda u: -u[0])
-    runner(_coarse_unit, [(url, t, b, cfg) for _, t, b in units], "coarse: tiles")
+    runner(in_child(_coarse_unit, load_kernels), [(url, t, b, cfg) for _, t, b in units], "coarse: tiles")
     if big:
-        runner(coarse_tile, [(url, t, cfg, n_blocks[t]) for t in big], "coarse: joins")
+        runner(in_child(coarse_tile), [(url, t, cfg, n_blocks[t]) for t in big], "coarse: joins")
     previous = stages.get(STAGE, {})
     t_stitch = time.perf_counter()
     if not todo and previous.get("params_hash") == h and "n_tile_segments" in previous:

@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.graph import in_child
 from pipeline.tree_stage import MERGE_CLASS_MAP, MERGE_MAP, ROWS
 from tiling.classes import NUM_CLASSES
 from tiling.errors import PipelineError
@@ -323,7 +324,9 @@ def run_labels(url: str, *, use_tree: bool, runner: Any) -> LabelsReport:
     if not done_r:  # first time with these parameters: fresh, zero-filled arrays
         for k, dt in LABEL_DTYPES.items():
             store.create_array(f"labels/{k}", shape=(n_points,), dtype=dt)
-    results = runner(labels_tile, [(url, t, cfg) for t in todo_t], "labels: tiles")
+    # Each task in a child process of its worker (in_child): what one task leaves in a
+    # worker's heap does not raise the next one's peak.
+    results = runner(in_child(labels_tile), [(url, t, cfg) for t in todo_t], "labels: tiles")
     for t, info in zip(todo_t, results, strict=True):
         done_t[str(t)] = info
     parts: dict[int, list[tuple[str, int, int]]] = {}
@@ -332,7 +335,7 @@ def run_labels(url: str, *, use_tree: bool, runner: Any) -> LabelsReport:
             parts.setdefault(r, []).append((group, a, b))
     n_ranges = -(-n_points // RANGE_ROWS)
     todo_r = [r for r in range(n_ranges) if str(r) not in done_r]
-    runner(labels_range, [(url, r, parts.get(r, []), cfg) for r in todo_r], "labels: ranges")
+    runner(in_child(labels_range), [(url, r, parts.get(r, []), cfg) for r in todo_r], "labels: ranges")
     n_labelled = sum(int(done_t[str(t)]["n_points"]) for t in tiles)
     store.update_attrs({"stages": {**store.attrs.get("stages", {}), STAGE: {
         "params_hash": h, "units": n_ranges, "done": n_ranges, "tree": use_tree, "n_labelled": n_labelled}}})

@@ -27,6 +27,7 @@ Store layout written here (``docs/store.md``)::
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -38,6 +39,7 @@ import numpy as np
 import pyarrow as pa
 
 from pipeline.coarse import _read_table, _write_table
+from pipeline.graph import in_child
 from tiling.classes import PLANAR_CLASSES, ClassId
 from tiling.errors import ConfigError, PipelineError
 from tiling.store import RunStore
@@ -197,6 +199,14 @@ def _worker_threads() -> int | None:
     except (ImportError, ValueError):
         return None
     return 1
+
+
+def _load_classifier(weights: str | None) -> None:
+    """Load HollowNet in this process as :func:`tree_batch` will use it (the worker's, before
+    it forks a batch's child: ``pipeline.graph.in_child``)."""
+    from hollownet.predict import Classifier
+
+    Classifier.get(weights, num_threads=_worker_threads())
 
 
 _PLANAR = np.array([int(c) for c in PLANAR_CLASSES], dtype=np.uint8)
@@ -452,8 +462,12 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any) -> TreeReport:
         lo, hi = batches[b]
         return starts[(starts >= lo) & (starts < hi)].tolist()
 
-    results = runner(tree_batch, [(url, b, batches[b], cfg, None if ground is None else ground[slice(*batches[b])],
-                                   starts_in(b)) for b in todo], "tree: batches")
+    # Each batch in a child process of its worker (in_child), HollowNet loaded once in the
+    # worker before its first fork: a long-lived worker's later batches otherwise peak
+    # above its first (what its heap and torch kept of the earlier ones).
+    results = runner(in_child(tree_batch, functools.partial(_load_classifier, params.weights)),
+                     [(url, b, batches[b], cfg, None if ground is None else ground[slice(*batches[b])],
+                       starts_in(b)) for b in todo], "tree: batches")
     for b, info in zip(todo, results, strict=True):
         done[str(b)] = info
     infos = [done[str(b)] for b in range(len(batches))]

@@ -29,6 +29,7 @@ already holds them.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numba
@@ -74,6 +75,18 @@ class PointColumns:
         xyz = np.stack((self.x[sl], self.y[sl], self.z[sl]), axis=1)
         nrm = np.stack((self.nx[sl], self.ny[sl], self.nz[sl]), axis=1)
         return xyz, nrm, self.pp[sl], self.npx[sl]
+
+
+@functools.lru_cache(maxsize=1)
+def load_kernels() -> None:
+    """Load (or compile) the kernels now, in this process: a worker calls it before it forks
+    a task's child (``pipeline.graph.in_child``), whose kernels are then already loaded
+    (shared copy-on-write) instead of loaded from numba's cache in every child (about
+    0.35 s and 45 MB each)."""
+    pts = point_columns(np.zeros((1, 3)), np.zeros((1, 3)))
+    compatible_counts("plane", np.zeros((1, 8)), pts, epsilon=0.1, cos_alpha=0.9)
+    compatible_mask("plane", np.zeros((1, 8)), pts, epsilon=0.1, cos_alpha=0.9)
+    shared_hits(np.zeros((1, 1), dtype=bool), np.zeros(1, dtype=bool))
 
 
 def point_columns(xyz: F64, normals: F64, sq_norm: F64 | None = None, normal_dot: F64 | None = None

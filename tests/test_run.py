@@ -307,3 +307,69 @@ def test_fresh_workers_replaces_only_our_own_worker_processes():
         assert not _alive(after[0])
     assert len({*before, *after, *again}) == 3
     assert os.getpid() not in before + after
+
+
+_PREPARED: list[int] = []
+
+
+def _prepare() -> None:
+    _PREPARED.append(os.getpid())
+
+
+def _prepared() -> list[int]:
+    return list(_PREPARED)
+
+
+def _pids() -> tuple[int, int]:
+    return os.getpid(), os.getppid()
+
+
+def _rss_mb() -> float:
+    import psutil
+
+    return psutil.Process().memory_info().rss / 2**20
+
+
+def _hold_memory(mb: int) -> float:
+    """Touch ``mb`` MB and return this process's resident MB while holding it."""
+    block = np.ones(mb * 2**20 // 8)
+    return _rss_mb() + 0 * float(block[-1])
+
+
+def _fail(message: str) -> None:
+    from tiling.errors import ConfigError
+
+    raise ConfigError(message)
+
+
+def _die() -> None:
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def test_in_child_runs_each_task_in_a_child_of_its_worker_and_frees_its_memory():
+    """``in_child`` tasks run in a process forked from their worker (``prepare`` first, in
+    the worker): the worker gets the child's memory back, the child's result or exception
+    comes back, and a child killed by a signal is a PipelineError that says so. Outside a
+    worker process (the sync runner) the task runs in place."""
+    from pipeline.graph import in_child, task_runner
+    from tiling.errors import ConfigError, PipelineError
+
+    with task_runner("sync", progress=False) as run:
+        assert run(in_child(_pids), [()], "pids") == [_pids()]
+    with task_runner(None, workers=1, progress=False) as run:
+        [worker] = run(os.getpid, [()], "pid")
+        [(pid, ppid)] = run(in_child(_pids, _prepare), [()], "pids")
+        assert ppid == worker
+        assert pid != worker
+        assert not _alive(pid)  # waited for: no zombie, no orphan
+        assert run(_prepared, [()], "prepared") == [[worker]]
+        [base] = run(_rss_mb, [()], "rss")
+        [held] = run(in_child(_hold_memory), [(400,)], "hold")
+        assert held > 400  # the child held it (its RSS: what it touched of the worker, and the block)
+        [after] = run(_rss_mb, [()], "rss")
+        assert after < base + 50, (base, held, after)
+        with pytest.raises(ConfigError, match="bad key x"):
+            run(in_child(_fail), [("bad key x",)], "fail")
+        with pytest.raises(PipelineError, match="task _die: its child process was killed by signal 9"):
+            run(in_child(_die), [()], "die")
+        assert run(os.getpid, [()], "pid") == [worker]  # the worker itself lives on
