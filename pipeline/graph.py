@@ -121,7 +121,7 @@ class in_child:  # noqa: N801  (used like a function: ``runner(in_child(fn), ...
     what earlier tasks left behind (the C allocator's fragments, scattered small objects):
     a coarse block task of 2.2 M points peaked at 789, 864 and 875 MB as the first,
     second and third task of one process, for the same +570 MB working set
-    (docs/benchmarks.md, "A child process per coarse task"). ``prepare()`` runs in the
+    (docs/benchmarks.md, "A child process per task"). ``prepare()`` runs in the
     worker before each fork (cheap after its first call): what it loads there, such as
     compiled kernels, the children share copy-on-write instead of loading it each.
 
