@@ -340,16 +340,55 @@ def _segment_block(xyz: np.ndarray, rows: np.ndarray, mine: np.ndarray, b: int, 
             "fits": fits, "n_invalid": int(no_normal[mine].sum())}
 
 
-def _block_inputs(xy: np.ndarray, cap: int, margin: float) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
+#: A block whose context (its own points and those within the margin) holds more than
+#: this many times ``block_points`` is cut again (:func:`_block_inputs`): a block task's
+#: memory follows its context. The 10 M- and 100 M-point benchmarks' largest contexts are
+#: 0.98 ``block_points``; at 200 M one block of 2.09 M own points had 2.71 M (1.23).
+CONTEXT_FACTOR = 1.2
+
+
+def _block_inputs(xy: np.ndarray, cap: int, margin: float, scale: np.ndarray | None = None
+                  ) -> tuple[int, Iterator[tuple[np.ndarray, np.ndarray]]]:
     """The blocks of a tile (:func:`primitives.blocks.split_blocks`) and, for each, its
     context: the tile rows within ``margin`` of the block's rectangle and which of them
-    the block owns. Returns ``block_of`` per point and ``[(rows, mine), ...]`` per block."""
-    block_of, rects = split_blocks(xy, cap)
-    out = []
-    for b in range(len(rects)):
-        ctx = block_context(xy, rects[b], margin)
-        out.append((ctx, block_of[ctx] == b))
-    return block_of, out
+    the block owns. ``xy`` are metres, or the store's integer coordinates with their
+    ``scale`` (the same blocks and contexts, to the bit). Returns the number of blocks and
+    ``(rows, mine)`` per block, each made when it is taken.
+
+    A block whose context holds more than ``CONTEXT_FACTOR * cap`` points (a dense spot
+    just outside it) has its own points split again in halves, the first half keeping
+    its number and the others numbered after the last block, while it still owns more
+    than ``cap / 4`` points.
+    """
+    block_of, rects = split_blocks(xy, cap, scale)
+    s = np.ones(2) if scale is None else np.asarray(scale, dtype=np.float64)[:2]
+
+    def context(rect: np.ndarray) -> np.ndarray:
+        # In metres a piece at a time, as xy * scale: no float copy of the tile.
+        return np.concatenate([block_context(xy[a:a + READ_ROWS, :2].astype(np.float64) * s, rect, margin) + a
+                               for a in range(0, len(xy), READ_ROWS)] or [np.zeros(0, np.int64)])
+
+    rect_list = list(rects)
+    b = 0
+    while b < len(rect_list):
+        if len(context(rect_list[b])) > CONTEXT_FACTOR * cap:
+            own = np.flatnonzero(block_of == b)
+            if 4 * len(own) > cap:
+                sub_of, sub_rects = split_blocks(xy[own], (len(own) + 1) // 2, scale)
+                if len(sub_rects) > 1:
+                    for j in range(1, len(sub_rects)):
+                        block_of[own[sub_of == j]] = len(rect_list)
+                        rect_list.append(sub_rects[j])
+                    rect_list[b] = sub_rects[0]
+                    continue  # the first half again
+        b += 1
+
+    def contexts() -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        for b, rect in enumerate(rect_list):
+            ctx = context(rect)
+            yield ctx, block_of[ctx] == b
+
+    return len(rect_list), contexts()
 
 
 def _join_blocks(n: int, results: Iterable[dict[str, Any]], params: CoarseParams
@@ -441,10 +480,10 @@ def _segment_tile(xyz: np.ndarray, params: CoarseParams, eps: float, tile: int, 
         rng = np.random.default_rng(np.random.SeedSequence([params.seed, tile]))
         seg, fits, no_normal = _segment_points(xyz, params, eps, rng)
         return seg, fits, int(no_normal.sum()), 1
-    _, inputs = _block_inputs(xyz[:, :2], cap, margin)
+    n_blocks, inputs = _block_inputs(xyz[:, :2], cap, margin)
     results = (_segment_block(xyz[rows], rows, mine, b, params, eps, tile) for b, (rows, mine) in enumerate(inputs))
     segment, fits, n_invalid = _join_blocks(n, results, params)
-    return segment, fits, n_invalid, len(inputs)
+    return segment, fits, n_invalid, n_blocks
 
 
 def _margin(store: RunStore, cfg: dict[str, Any], params: CoarseParams) -> float:
@@ -464,21 +503,20 @@ def plan_blocks(url: str, tile: int, cfg: dict[str, Any]) -> int:
     store = RunStore.open(url, mode="a")
     params = CoarseParams.from_dict(cfg["params"])
     raw = store.read_unit(f"tiles/{tile}", ["xyz"])["xyz"]
-    scale = np.asarray(store.attrs["coords"]["scale"])
-    # The same metres as the tile's (_tile_points), without a temporary; the stored
-    # coordinates are read again for the blocks' inputs rather than held during the split
-    # (the task follows about 40 bytes per row of the tile: the 7.9 M rows of the 100 M-point
-    # benchmark's densest tile cost more than a block task before, 80 bytes per row).
-    xy = np.multiply(raw[:, :2], scale[:2], out=np.empty((len(raw), 2), dtype=np.float64))
-    del raw
-    block_of, inputs = _block_inputs(xy, params.block_points, _margin(store, cfg, params))
-    del xy, block_of
-    raw = store.read_unit(f"tiles/{tile}", ["xyz"])["xyz"]
+    scale = np.asarray(store.attrs["coords"]["scale"], dtype=np.float64)
+    # Split on the stored integers with their scale (the blocks of the tile's metres,
+    # _tile_points, to the bit) and write each block's input as it is made: the task
+    # holds the stored coordinates (12 bytes a row) and about 17 bytes a row more during
+    # the split, not a float copy of the tile (the 7.9 M rows of the 100 M-point
+    # benchmark's densest tile cost about 40 bytes a row before 2026-11-27).
+    n_blocks, inputs = _block_inputs(raw, params.block_points, _margin(store, cfg, params), scale[:2])
+    n_context = 0
     for b, (rows, mine) in enumerate(inputs):
         store.write_unit(f"coarse/block_input/{tile}/{b}", {"rows": rows, "mine": mine, "xyz": raw[rows]})
-    store.record(PLAN_STAGE, str(tile), {"params_hash": cfg["params_hash"], "n_blocks": len(inputs),
-                                         "n_context": int(sum(len(r) for r, _ in inputs))})
-    return len(inputs)
+        n_context += len(rows)
+    store.record(PLAN_STAGE, str(tile), {"params_hash": cfg["params_hash"], "n_blocks": n_blocks,
+                                         "n_context": n_context})
+    return n_blocks
 
 
 def coarse_block(url: str, tile: int, b: int, cfg: dict[str, Any]) -> dict[str, Any]:
@@ -1123,8 +1161,10 @@ EPS_FACTOR = 9.0
 # The version of the stage's code where it changes a result (recorded with a run's
 # workflow, so a rerun after such a change redoes the stage). coarse-v2: the eps rule above;
 # coarse-v3: segments set in a wall join it, stacked groups join (group_set_in, group_stack);
-# coarse-v4: a free segment wider than STRIP_FACTOR x group_max_plane is large.
-COARSE_ALGORITHM = "coarse-v4"
+# coarse-v4: a free segment wider than STRIP_FACTOR x group_max_plane is large;
+# coarse-v6 (v5 named a trial that was dropped): a block whose context holds more than
+# CONTEXT_FACTOR x block_points is cut again (_block_inputs).
+COARSE_ALGORITHM = "coarse-v6"
 SPACING_WINDOWS = 1024
 WINDOW_ROWS = 1024
 

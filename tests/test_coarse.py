@@ -88,23 +88,72 @@ def test_blocks_inside_a_tile_do_not_change_the_answer(scan, untiled, tmp_path, 
 
 def test_block_split_holds_no_copy_of_the_coordinates():
     """The split of a dense tile into blocks (primitives.blocks.split_blocks) takes its
-    columns as views and one coordinate at a time: about 32 bytes per point besides its
-    input (57 when it copied both columns and both coordinates of every rectangle), so a
-    plan task of the 100 M-point benchmark's 7.9 M-row tile costs less than a block task."""
+    columns as views, one coordinate at a time, and int32 indices: about 17 bytes per
+    point besides its input (57 when it copied both columns and both coordinates of every
+    rectangle, 32-45 with int64 indices), so a plan task of the 100 M-point benchmark's
+    7.9 M-row tile costs less than a block task."""
     import tracemalloc
 
     from primitives.blocks import split_blocks
 
     xy = np.random.default_rng(0).random((400_000, 2)) * [30.0, 20.0]
-    tracemalloc.start()
-    try:
-        block_of, rects = split_blocks(xy, 100_000)
-        peak = tracemalloc.get_traced_memory()[1]
-    finally:
-        tracemalloc.stop()
-    assert len(rects) == 4
-    assert np.bincount(block_of).max() <= 100_000
-    assert peak / len(xy) < 45
+    for a in (xy, (xy * 1e6).astype(np.int32)):
+        tracemalloc.start()
+        try:
+            block_of, rects = split_blocks(a, 100_000)
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        assert len(rects) == 4
+        assert np.bincount(block_of).max() <= 100_000
+        assert peak / len(xy) < 20
+
+
+def test_blocks_of_stored_integers_are_those_of_their_metres():
+    """plan_blocks splits a tile's stored integers with their scale: the blocks and the
+    rectangles are those of the metres (integers times scale, in float64) to the bit,
+    with ties on the median and a scale of its own per axis."""
+    from primitives.blocks import split_blocks
+
+    rng = np.random.default_rng(1)
+    for scale in ([0.001, 0.001], [0.00025, 0.0005], [0.01, 0.003]):
+        raw = rng.integers(-3_000, 40_000, size=(60_000, 3)).astype(np.int32)
+        raw[:20_000, 0] = 7_000  # a column of equal x: the median falls on a tie
+        raw[20_000:26_000, 1] = raw[20_000, 1]
+        s = np.asarray(scale + [0.001])
+        metres = raw.astype(np.float64) * s
+        for cap in (5_000, 17_000):
+            b_int, r_int = split_blocks(raw, cap, scale)
+            b_m, r_m = split_blocks(metres[:, :2], cap)
+            np.testing.assert_array_equal(b_int, b_m)
+            np.testing.assert_array_equal(r_int, r_m)
+    with pytest.raises(ConfigError, match="scale"):
+        split_blocks(raw, 10, [0.0, 1.0])
+
+
+def test_a_block_with_a_dense_context_is_cut_again():
+    """A block whose context (own points and those within the margin) holds more than
+    CONTEXT_FACTOR * block_points is split again while it owns more than a quarter of
+    block_points; blocks with a small context are split_blocks' own, numbers included."""
+    from pipeline.coarse import CONTEXT_FACTOR, _block_inputs
+    from primitives.blocks import block_context, split_blocks
+
+    xy = np.random.default_rng(3).random((20_000, 2)) * 10.0
+    cap = 10_000
+    block_of, rects = split_blocks(xy, cap)
+    n, inputs = _block_inputs(xy, cap, 0.05)  # a thin margin: split_blocks' blocks
+    assert n == len(rects)
+    for b, (rows, mine) in enumerate(inputs):
+        np.testing.assert_array_equal(rows, block_context(xy, rects[b], 0.05))
+        np.testing.assert_array_equal(rows[mine], np.flatnonzero(block_of == b))
+    n, inputs = _block_inputs(xy, cap, 2.0)  # contexts of about 1.4 blocks: cut again
+    assert n > len(rects)
+    owner = np.full(len(xy), -1)
+    for b, (rows, mine) in enumerate(inputs):
+        assert (owner[rows[mine]] == -1).all()
+        owner[rows[mine]] = b
+        assert len(rows) <= CONTEXT_FACTOR * cap or 4 * mine.sum() <= cap
+    assert (owner >= 0).all()
 
 
 def test_block_points_is_validated():

@@ -23,6 +23,16 @@ def scan(tmp_path_factory):
     return path
 
 
+#: The tree of the tests that change one step of the tree stage and compare with the plain run.
+SHALLOW = "{enabled: true, max_depth: 1}"
+
+
+@pytest.fixture(scope="module")
+def shallow(tmp_path_factory, scan):
+    """The plain run with the SHALLOW tree, once for the tests that compare with it (read only)."""
+    return _run(tmp_path_factory.mktemp("shallow"), scan, tree=SHALLOW)
+
+
 def _run(tmp_path, scan, extra="", tree="{enabled: false}", ingest="{tile_size: 50.0}"):
     tmp_path.mkdir(parents=True, exist_ok=True)
     wf_path = tmp_path / "wf.yaml"
@@ -89,14 +99,14 @@ outputs: {{las: {tmp_path / 'o.las'}}}
     np.testing.assert_array_equal(np.asarray(out["segment_id"]), lab["segment"])
 
 
-def test_large_groups_are_built_on_a_sample(tmp_path, scan):
+def test_large_groups_are_built_on_a_sample(tmp_path, scan, shallow):
     """An element group above tree.max_group_points builds its tree on a sample and every
     point takes its nearest sampled point's labels: all points labelled, node counts cover
     the whole group, and the classes mostly agree with the tree on every point."""
     import pyarrow.parquet as pq
 
-    store, sampled = _run(tmp_path / "a", scan, tree="{enabled: true, max_group_points: 4000}")
-    _, full = _run(tmp_path / "b", scan, tree="{enabled: true, max_group_points: 0}")
+    store, sampled = _run(tmp_path / "a", scan, tree="{enabled: true, max_depth: 1, max_group_points: 4000}")
+    _, full = shallow  # every group of this small scan is below the default max_group_points
     recs = store.records("tree")
     big = [b for b, r in recs.items() if r["n_points"] > 4000 and r["n_segments"] >= 1]
     assert big
@@ -140,7 +150,7 @@ def test_labels_in_small_parts_are_the_same(tmp_path, scan, monkeypatch, voxel):
 
 
 
-def test_instances_merged_across_groups_reach_labels_and_nodes(tmp_path, scan, monkeypatch):
+def test_instances_merged_across_groups_reach_labels_and_nodes(tmp_path, scan, shallow, monkeypatch):
     """The tree stage's merge map (tree/merge.py) is what labels/instance and
     tree/nodes.parquet hold: a map that joins every instance into instance 1 leaves one
     instance wherever there was one; the classes are untouched."""
@@ -149,8 +159,7 @@ def test_instances_merged_across_groups_reach_labels_and_nodes(tmp_path, scan, m
     import tree.merge as tm
     from pipeline.tree_stage import MERGE_MAP
 
-    tree = "{enabled: true, max_depth: 1}"
-    plain_store, plain = _run(tmp_path / "plain", scan, tree=tree)
+    plain_store, plain = shallow
     imap = plain_store.read_slice(MERGE_MAP)
     assert imap[0] == 0
     np.testing.assert_array_equal(imap, np.arange(len(imap)))  # this small scan: nothing to merge
@@ -160,14 +169,14 @@ def test_instances_merged_across_groups_reach_labels_and_nodes(tmp_path, scan, m
         return np.minimum(np.arange(n_instances + 1), 1).astype(np.uint32)
 
     monkeypatch.setattr(tm, "merge_instances", merge_all)
-    store, merged = _run(tmp_path / "all", scan, tree=tree)
+    store, merged = _run(tmp_path / "all", scan, tree=SHALLOW)
     np.testing.assert_array_equal(merged["class"], plain["class"])
     np.testing.assert_array_equal(merged["instance"], np.minimum(plain["instance"], 1))
     nodes = pq.read_table(tmp_path / "all" / "s.zarr" / "tree" / "nodes.parquet").column("instance").to_numpy()
     assert set(np.unique(nodes).tolist()) <= {0, 1}
 
 
-def test_classes_after_the_merge_reach_labels_and_nodes(tmp_path, scan, monkeypatch):
+def test_classes_after_the_merge_reach_labels_and_nodes(tmp_path, scan, shallow, monkeypatch):
     """The tree stage's class map (tree.merge.merged_classes: a piece that joined an
     instance of another class takes its class) is what labels/class and the instance
     nodes of tree/nodes.parquet hold; points in no instance keep the tree's class."""
@@ -176,8 +185,7 @@ def test_classes_after_the_merge_reach_labels_and_nodes(tmp_path, scan, monkeypa
     import tree.merge as tm
     from pipeline.tree_stage import MERGE_CLASS_MAP
 
-    tree = "{enabled: true, max_depth: 1}"
-    plain_store, plain = _run(tmp_path / "plain", scan, tree=tree)
+    plain_store, plain = shallow
     assert plain_store.has(MERGE_CLASS_MAP)
 
     def all_other(instance, class_id, instance_map, **kw):
@@ -186,7 +194,7 @@ def test_classes_after_the_merge_reach_labels_and_nodes(tmp_path, scan, monkeypa
         return out
 
     monkeypatch.setattr(tm, "merged_classes", all_other)
-    _, merged = _run(tmp_path / "other", scan, tree=tree)
+    _, merged = _run(tmp_path / "other", scan, tree=SHALLOW)
     inside = plain["instance"] > 0
     assert inside.any()
     assert (~inside).any()
@@ -197,15 +205,14 @@ def test_classes_after_the_merge_reach_labels_and_nodes(tmp_path, scan, monkeypa
     assert (nodes.column("class_id").to_numpy()[inst > 0] == int(ClassId.OTHER)).all()
 
 
-def test_arcade_cells_reach_labels(tmp_path, scan, monkeypatch):
+def test_arcade_cells_reach_labels(tmp_path, scan, shallow, monkeypatch):
     """The tree stage's arcade cells (tree/rows.py) are what the labels stage applies:
     inside a `take` cell the wall, other, pillar and dome points join its bay (class arch),
     every other point keeps its labels; the cells are kept in tree/rows/cells."""
     import tree.rows as tr
     from pipeline.tree_stage import ROWS
 
-    tree = "{enabled: true, max_depth: 1}"
-    plain_store, plain = _run(tmp_path / "plain", scan, tree=tree)
+    plain_store, plain = shallow
     assert plain_store.has(ROWS)
     las = laspy.read(scan)
     off = np.asarray(plain_store.attrs["coords"]["offset"])
@@ -215,7 +222,7 @@ def test_arcade_cells_reach_labels(tmp_path, scan, monkeypatch):
     cells = tr.ArcadeCells(np.array([[p[0], p[1], 0.6, 0.8]]), np.array([[-3.0, 3.0, -3.0, 3.0, p[2] - 3.0, p[2] + 3.0]]),
                            np.array([10_000]), np.array([True]), np.array([False]))
     monkeypatch.setattr(tr, "arcade_cells", lambda samples, next_id, domes=None: (cells, {}))
-    store, got = _run(tmp_path / "cells", scan, tree=tree)
+    store, got = _run(tmp_path / "cells", scan, tree=SHALLOW)
     np.testing.assert_array_equal(tr.ArcadeCells.from_array(store.read_slice(ROWS)).instance, [10_000])
     want_cls, want_inst = tr.apply_cells(xyz, plain["class"], plain["instance"], cells)
     changed = want_inst != plain["instance"]
@@ -225,15 +232,14 @@ def test_arcade_cells_reach_labels(tmp_path, scan, monkeypatch):
     np.testing.assert_array_equal(got["instance"], want_inst)
 
 
-def test_frame_joins_reach_labels(tmp_path, scan, monkeypatch):
+def test_frame_joins_reach_labels(tmp_path, scan, shallow, monkeypatch):
     """A face that tree/frames.py joins to a passage is that instance in the labels, with
     class arch, wall faces included; the frames' cells follow the rows' in tree/rows/cells."""
     import tree.frames as tf
     import tree.rows as tr
     from pipeline.tree_stage import ROWS
 
-    tree = "{enabled: true, max_depth: 1}"
-    _, plain = _run(tmp_path / "plain", scan, tree=tree)
+    _, plain = shallow
     chosen: dict[str, int] = {}
 
     def frames(arches, walls, skip, next_id=None):
@@ -244,7 +250,7 @@ def test_frame_joins_reach_labels(tmp_path, scan, monkeypatch):
         return cell, {chosen["wall"]: chosen["into"]}
 
     monkeypatch.setattr(tf, "frame_cells", frames)
-    store, got = _run(tmp_path / "frames", scan, tree=tree)
+    store, got = _run(tmp_path / "frames", scan, tree=SHALLOW)
     assert tr.ArcadeCells.from_array(store.read_slice(ROWS)).instance[-1] == chosen["into"]
     face = plain["instance"] == chosen["wall"]
     assert face.sum() > 50
@@ -263,11 +269,10 @@ def test_workers_are_replaced_after_each_stage_that_ran_tasks(tmp_path, scan, mo
 
     calls: list[int] = []
     monkeypatch.setattr(pipeline.graph, "fresh_workers", lambda runner: calls.append(1))
-    tree = "{batch_points: 40000}"
-    _run(tmp_path, scan, tree=tree)
+    _run(tmp_path, scan, tree=SHALLOW)
     assert len(calls) == 3
     calls.clear()
-    _run(tmp_path, scan, tree="{batch_points: 40000, max_depth: 2}")
+    _run(tmp_path, scan, tree="{enabled: true, max_depth: 2}")
     assert len(calls) == 1
     calls.clear()
     _run(tmp_path, scan, tree="{enabled: false}")  # labels only: no stage before it ran tasks

@@ -113,17 +113,6 @@ def test_export_las_keeps_input_order_dims_and_labels(reference, scan):
     assert (reference["dir"] / "v.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-def test_changed_parameter_redoes_only_downstream(reference, scan, tmp_path):
-    store = str(tmp_path / "c.zarr")
-    wf = _workflow(tmp_path, scan, store)
-    assert _cli("run", str(wf), "--no-progress", "--set", "tree.enabled=false").returncode == 0
-    proc = _cli("run", str(wf), "--no-progress")
-    assert proc.returncode == 0, proc.stderr
-    assert "redoing tree, labels" in proc.stdout
-    assert "tiles 0 run" in proc.stdout.split("coarse:")[1].splitlines()[0]  # coarse skipped
-    _same(_labels(store), reference["labels"])
-
-
 def test_store_of_an_older_coarse_algorithm_is_redone(reference, scan, tmp_path):
     """A store whose workflow records an older coarse code (another eps rule) redoes its
     coarse stage and everything after it, not "nothing to do"."""
@@ -224,32 +213,30 @@ def dask_cluster(tmp_path):
         p.wait()
 
 
-def test_cli_started_dask_cluster_matches_local(reference, scan, tmp_path, dask_cluster):
-    address, _ = dask_cluster
-    store = str(tmp_path / "c.zarr")
-    wf = REPO / "workflows" / "cluster.yaml"
-    proc = _cli("run", str(wf), "--no-progress", "--scheduler", address, "--set", f"input.files=[{scan}]",
-                "--set", f"store={store}", "--set", "ingest.tile_size=50.0", "--set", "ingest.voxel=null",
-                "--set", "coarse.min_support=300", "--set", "tree.batch_points=40000",
-                "--set", f"outputs.parquet={tmp_path / 't'}")
-    assert proc.returncode == 0, proc.stderr
-    _same(_labels(store), reference["labels"])
-
-
-def test_a_worker_dies_mid_run(reference, scan, tmp_path, dask_cluster):
+def test_cli_started_dask_cluster_matches_local_when_a_worker_dies(reference, scan, tmp_path, dask_cluster):
+    """The bundled cluster workflow on a CLI-started cluster of two workers, one of them
+    killed mid-run: the run finishes on the other with the plain local run's labels."""
     address, procs = dask_cluster
-    store = tmp_path / "w.zarr"
-    wf = _workflow(tmp_path, scan, str(store))
-    run = subprocess.Popen([sys.executable, "-m", "pipeline.cli", "run", str(wf), "--no-progress",
-                            "--scheduler", address], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    store = tmp_path / "c.zarr"
+    wf = REPO / "workflows" / "cluster.yaml"
+    run = subprocess.Popen([sys.executable, "-m", "pipeline.cli", "run", str(wf), "--no-progress", "--scheduler",
+                            address, "--set", f"input.files=[{scan}]", "--set", f"store={store}",
+                            "--set", "ingest.tile_size=50.0", "--set", "ingest.voxel=null",
+                            "--set", "coarse.min_support=300", "--set", "tree.batch_points=40000",
+                            "--set", f"outputs.parquet={tmp_path / 't'}"],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     _wait_for_records(store, "coarse", 1, run)
     os.killpg(procs[2].pid, signal.SIGKILL)  # one worker process, mid-run
     out, err = run.communicate(timeout=600)
     assert run.returncode == 0, err
     _same(_labels(str(store)), reference["labels"])
+    assert (tmp_path / "t" / "segments.parquet").is_file()
 
 
-def test_store_on_s3_moto_server(reference, scan, tmp_path, monkeypatch):
+def test_store_on_s3_moto_server_and_a_changed_parameter(reference, scan, tmp_path, monkeypatch):
+    """A run store on S3 (moto server), first run without the tree, then with it: the
+    second run redoes only the tree and labels (no coarse tile run again), and the labels
+    are the plain local run's."""
     pytest.importorskip("moto", reason="moto[server] is a dev dependency")
     pytest.importorskip("s3fs", reason="s3fs is a dev dependency")
     port = _free_port()
@@ -269,8 +256,12 @@ def test_store_on_s3_moto_server(reference, scan, tmp_path, monkeypatch):
         fs = s3fs.S3FileSystem(key="test", secret="test", endpoint_url=env["AWS_ENDPOINT_URL"])
         fs.mkdir("hollowtree-test")
         wf = _workflow(tmp_path, scan, "s3://hollowtree-test/run.zarr")
+        first = _cli("run", str(wf), "--no-progress", "--set", "tree.enabled=false", env=env)
+        assert first.returncode == 0, first.stderr
         proc = _cli("run", str(wf), "--no-progress", env=env)
         assert proc.returncode == 0, proc.stderr
+        assert "redoing tree, labels" in proc.stdout
+        assert "tiles 0 run" in proc.stdout.split("coarse:")[1].splitlines()[0]  # coarse skipped
         for k, v in env.items():
             if k.startswith("AWS_"):
                 monkeypatch.setenv(k, v)
