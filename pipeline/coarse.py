@@ -1268,7 +1268,7 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     n_blocks = {t: planned[str(t)] for t in big if str(t) in planned}
     unplanned = sorted((t for t in big if t not in n_blocks), key=lambda t: -size[t])
     # Each task in a child process of its worker (in_child): a worker's heap would keep
-    # what its earlier tasks left, and a later task peak 80-90 MB above the first.
+    # what its earlier tasks left, and a later task peak 80-140 MB above the first.
     n_blocks.update(zip(unplanned, runner(in_child(plan_blocks), [(url, t, cfg) for t in unplanned],
                                           "coarse: blocks"), strict=True))
     blocks_done = {k for k, v in store.records(BLOCK_STAGE).items() if v.get("params_hash") == h}
