@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import laspy
@@ -51,16 +52,29 @@ def _labels(scan_path: Path, store: Path) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def untiled(scan, tmp_path_factory) -> np.ndarray:
-    return _segment(scan, tmp_path_factory.mktemp("untiled") / "s", 500.0)
+def untiled_run(scan, tmp_path_factory) -> tuple[np.ndarray, Path]:
+    """Segment per point and store of the whole scan in one tile (PARAMS); shared, read only."""
+    store = tmp_path_factory.mktemp("untiled") / "s"
+    return _segment(scan, store, 500.0), store
+
+
+@pytest.fixture(scope="module")
+def untiled(untiled_run) -> np.ndarray:
+    return untiled_run[0]
 
 
 @pytest.mark.parametrize("tile_size", [10.0, 20.0, 50.0])
-def test_tile_size_does_not_change_the_answer(scan, untiled, tmp_path, tile_size):
-    tiled = _segment(scan, tmp_path / "s", tile_size)
+def test_tile_size_does_not_change_the_answer(scan, untiled_run, request, tmp_path, tile_size):
+    """Neither the segments nor their element groups move with the tile size."""
+    untiled, untiled_store = untiled_run
+    if tile_size == 20.0:
+        tiled, store = request.getfixturevalue("tiled20")
+    else:
+        tiled, store = _segment(scan, tmp_path / "s", tile_size), tmp_path / "s"
     assert adjusted_rand_score(untiled, tiled) >= 0.95
     # no ground-truth element is split at a tile border
     _assert_elements_kept(scan, tiled, untiled)
+    assert adjusted_rand_score(_groups(untiled_store, untiled)[0], _groups(store, tiled)[0]) >= 0.95
 
 
 def _assert_elements_kept(scan: Path, labels: np.ndarray, reference: np.ndarray) -> None:
@@ -75,11 +89,26 @@ def _assert_elements_kept(scan: Path, labels: np.ndarray, reference: np.ndarray)
         assert share >= reference_share - 0.05, inst
 
 
+BLOCKED = CoarseParams(eps=0.3, block_points=8_000)
+
+
+@pytest.fixture(scope="module")
+def blocked8k(scan, tmp_path_factory) -> tuple[np.ndarray, Path]:
+    """Segment per point and store of the whole scan in one tile cut into blocks of 8 000
+    points (BLOCKED); shared, read only."""
+    store = tmp_path_factory.mktemp("blocked") / "s"
+    return _segment(scan, store, 500.0, BLOCKED), store
+
+
 @pytest.mark.parametrize("block_points", [8_000, 20_000])
-def test_blocks_inside_a_tile_do_not_change_the_answer(scan, untiled, tmp_path, block_points):
+def test_blocks_inside_a_tile_do_not_change_the_answer(scan, untiled, request, tmp_path, block_points):
     """A tile above ``block_points`` is segmented block by block and joined like tiles."""
-    blocked = _segment(scan, tmp_path / "s", 500.0, CoarseParams(eps=0.3, block_points=block_points))
-    recs = RunStore.open(tmp_path / "s").records("coarse")
+    if block_points == BLOCKED.block_points:
+        blocked, store = request.getfixturevalue("blocked8k")
+    else:
+        store = tmp_path / "s"
+        blocked = _segment(scan, store, 500.0, CoarseParams(eps=0.3, block_points=block_points))
+    recs = RunStore.open(store).records("coarse")
     assert all(r["n_blocks"] >= -(-r["n_points"] // block_points) for r in recs.values())
     assert max(r["n_blocks"] for r in recs.values()) >= 2  # tiles were split
     assert adjusted_rand_score(untiled, blocked) >= 0.95
@@ -264,34 +293,33 @@ def _groups(store, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.r_[0, grp][labels], grp
 
 
-def test_groups_are_runs_of_segments_and_do_not_depend_on_tiles(scan, tmp_path):
-    params = CoarseParams(eps=0.3, group_gap=0.5)
-    untiled = _segment(scan, tmp_path / "u", 500.0, params)
-    g_untiled, col = _groups(tmp_path / "u", untiled)
+def test_groups_are_runs_of_segments(scan, untiled_run, tmp_path):
+    """Element groups (ids 1..K) are runs of consecutive global segments, and grouping
+    leaves the segments themselves unchanged. (test_tile_size_does_not_change_the_answer
+    checks that the groups do not move with the tiles.)"""
+    untiled, store = untiled_run
+    _, col = _groups(store, untiled)
     # ids 1..K, each group one run of consecutive global segments, in order
     assert col[0] == 1
     assert set(np.diff(col).tolist()) <= {0, 1}
     assert 1 < col.max() < len(col)  # some segments were grouped, not all into one
-    starts = group_starts(RunStore.open(tmp_path / "u"))
+    starts = group_starts(RunStore.open(store))
     assert starts.tolist() == np.r_[np.flatnonzero(np.r_[True, col[1:] != col[:-1]]), len(col)].tolist()
     # a group is a union of segments: the segments themselves are unchanged by grouping
     plain = _segment(scan, tmp_path / "p", 500.0, CoarseParams(eps=0.3, group_gap=0.0))
     assert adjusted_rand_score(plain, untiled) == 1.0
     _, col0 = _groups(tmp_path / "p", plain)
     assert col0.tolist() == list(range(1, len(col0) + 1))  # grouping off: one group per segment
-    for tile_size in (10.0, 20.0):
-        tiled = _segment(scan, tmp_path / f"t{tile_size:g}", tile_size, params)
-        g_tiled, _ = _groups(tmp_path / f"t{tile_size:g}", tiled)
-        assert adjusted_rand_score(g_untiled, g_tiled) >= 0.95
 
 
-def test_large_planes_are_never_grouped(scan, tmp_path):
-    labels = _segment(scan, tmp_path / "s", 500.0, CoarseParams(eps=0.3, group_gap=0.5, group_max_plane=4.0))
-    table = pq.read_table(tmp_path / "s" / "coarse" / "segments.parquet").to_pydict()
+def test_large_planes_are_never_grouped(untiled_run):
+    labels, store = untiled_run
+    table = pq.read_table(store / "coarse" / "segments.parquet").to_pydict()
     grp = np.asarray(table["group"])
     sizes = np.bincount(grp)
     wide = [i for i, k in enumerate(table["kind"]) if k == "plane"
-            and np.hypot(table["xmax"][i] - table["xmin"][i], table["ymax"][i] - table["ymin"][i]) > 4.0]
+            and np.hypot(table["xmax"][i] - table["xmin"][i], table["ymax"][i] - table["ymin"][i])
+            > PARAMS.group_max_plane]
     assert wide  # the minaret scene's ground is one
     assert all(sizes[grp[i]] == 1 for i in wide)
     assert (labels > 0).any()
@@ -346,14 +374,14 @@ def test_segments_set_in_a_wall_join_it(arcade, tmp_path):
     assert share_on > share_off + 0.2
 
 
-def test_stacked_stages_are_one_group(scan, tmp_path):
+def test_stacked_stages_are_one_group(scan, untiled_run, tmp_path):
     """A minaret's stages, whose joints its balconies hide, become one group (group_stack)."""
     off = _segment(scan, tmp_path / "off", 500.0, CoarseParams(eps=0.3, group_stack=0.0))
-    on = _segment(scan, tmp_path / "on", 500.0, CoarseParams(eps=0.3))
+    on, on_store = untiled_run
     share_off = _largest_group_share(scan, tmp_path / "off", off, 6)
-    share_on = _largest_group_share(scan, tmp_path / "on", on, 6)
+    share_on = _largest_group_share(scan, on_store, on, 6)
     assert share_on > share_off + 0.1
-    assert len(set(_group_table(tmp_path / "on")["group"])) < len(set(_group_table(tmp_path / "off")["group"]))
+    assert len(set(_group_table(on_store)["group"])) < len(set(_group_table(tmp_path / "off")["group"]))
     assert adjusted_rand_score(off, on) == 1.0  # the segments themselves are unchanged
 
 
@@ -394,15 +422,13 @@ def test_sparse_part_of_a_plane_joins_its_dense_part():
     assert fits[main_near - 1]["kind"] == "plane"
 
 
-def test_block_tasks_equal_the_in_process_blocks(scan, tmp_path):
+def test_block_tasks_equal_the_in_process_blocks(blocked8k):
     """run_coarse runs the blocks of a dense tile as tasks of their own and joins them in a
     second round: the tile's segments equal those of the in-process loop, point by point,
     and the blocks' inputs and intermediate results are gone once the tile is recorded."""
     from pipeline.coarse import BLOCK_STAGE, PLAN_STAGE, _margin, _segment_tile, _tile_points
 
-    store_path = tmp_path / "s"
-    _segment(scan, store_path, 500.0, CoarseParams(eps=0.3, block_points=8_000))
-    s = RunStore.open(store_path)
+    s = RunStore.open(blocked8k[1])
     stage = s.attrs["stages"]["coarse"]
     params = CoarseParams.from_dict(stage["params"])
     cfg = {"eps": stage["eps"]}
@@ -456,13 +482,13 @@ def test_tile_tables_and_contacts_read_a_piece_at_a_time(scan, tmp_path, monkeyp
         assert (got["a"], got["b"], got["n"]) == (a.tolist(), b.tolist(), n.tolist())
 
 
-def test_stitch_reads_a_piece_at_a_time(scan, tmp_path, monkeypatch):
+def test_stitch_reads_a_piece_at_a_time(tiled20, tmp_path, monkeypatch):
     """The stitch reads tiles READ_ROWS rows at a time and matches buffer rows only to core
     rows near a tile's edge: the global ids, CSR and table equal those of whole tiles."""
     import pipeline.coarse as coarse
 
     store_path = tmp_path / "s"
-    _segment(scan, store_path, 20.0)
+    shutil.copytree(tiled20[1], store_path)  # the shared store stays as it is
     s = RunStore.open(store_path, mode="a")
     tiles = [int(t) for t in s.attrs["ingest"]["tiles"]]
     assert len(tiles) > 2
@@ -490,13 +516,13 @@ def test_stitch_reads_a_piece_at_a_time(scan, tmp_path, monkeypatch):
             assert np.array_equal(pieces[k], v), k
 
 
-def test_interrupted_block_tasks_resume(scan, tmp_path):
+def test_interrupted_block_tasks_resume(scan, blocked8k, tmp_path):
     """A run stopped after some block tasks resumes: planned tiles are not cut again,
     recorded blocks are not run again, and the answer is that of an uninterrupted run."""
     from pipeline.coarse import plan_blocks
 
-    params = CoarseParams(eps=0.3, block_points=8_000)
-    whole = _segment(scan, tmp_path / "a", 500.0, params)
+    params = BLOCKED
+    whole = blocked8k[0]
 
     def is_block(args, desc):
         return desc == "coarse: tiles" and args[2] >= 0

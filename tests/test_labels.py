@@ -33,6 +33,12 @@ def shallow(tmp_path_factory, scan):
     return _run(tmp_path_factory.mktemp("shallow"), scan, tree=SHALLOW)
 
 
+@pytest.fixture(scope="module")
+def plain(tmp_path_factory, scan):
+    """The run without the tree, once for the tests that read it or compare with it (read only)."""
+    return _run(tmp_path_factory.mktemp("plain"), scan)
+
+
 def _run(tmp_path, scan, extra="", tree="{enabled: false}", ingest="{tile_size: 50.0}"):
     tmp_path.mkdir(parents=True, exist_ok=True)
     wf_path = tmp_path / "wf.yaml"
@@ -49,8 +55,8 @@ cluster: {{scheduler: sync}}
     return store, {k: store.read_slice(f"labels/{k}") for k in LABEL_DTYPES}
 
 
-def test_labels_follow_the_input_order(tmp_path, scan):
-    store, lab = _run(tmp_path, scan)
+def test_labels_follow_the_input_order(scan, plain):
+    store, lab = plain
     src = laspy.read(scan)
     assert len(lab["segment"]) == len(src)
     # the coarse stage's own per-row answers, mapped back by original index, must agree
@@ -125,13 +131,13 @@ def test_large_groups_are_built_on_a_sample(tmp_path, scan, shallow):
 
 
 @pytest.mark.parametrize("voxel", [None, 0.2])
-def test_labels_in_small_parts_are_the_same(tmp_path, scan, monkeypatch, voxel):
+def test_labels_in_small_parts_are_the_same(tmp_path, scan, plain, monkeypatch, voxel):
     """A tile's labels written PART_ROWS points at a time (the stage's memory bound) are
     the labels of one part per tile, with and without voxel-dropped points."""
     import pipeline.labels as labels
 
     ingest = "{tile_size: 50.0}" if voxel is None else f"{{tile_size: 50.0, voxel: {voxel}}}"
-    _, whole = _run(tmp_path / "whole", scan, ingest=ingest)
+    _, whole = plain if voxel is None else _run(tmp_path / "whole", scan, ingest=ingest)
     monkeypatch.setattr(labels, "PART_ROWS", 2_000)
     small_store, small = _run(tmp_path / "small", scan, ingest=ingest)
     recs = small_store.records("labels_tiles")

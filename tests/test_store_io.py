@@ -88,3 +88,36 @@ def test_unit_writer_takes_strided_field_views(store):
     back = store.read_unit("tiles/1")
     for name in rows.dtype.names:
         assert np.array_equal(back[name], rows[name]), name
+
+
+def test_arrays_are_made_with_few_store_requests(tmp_path):
+    """A unit's arrays are made with one metadata object each, not Zarr's probe and
+    rewrite of every level above them (each a request on an object store): writing 8
+    small arrays into a new group four levels down calls the store 8 times for metadata,
+    8 for chunks and a few for the group, where Zarr's create_array made 125 calls.
+    Rewriting the unit replaces its arrays (none left of the old ones)."""
+    import zarr
+    from zarr.storage import LocalStore, LoggingStore
+
+    logged = LoggingStore(LocalStore(tmp_path / "s.zarr"), log_level="DEBUG")
+    root = zarr.open_group(store=logged, mode="a")
+    root.attrs["schema_version"] = 1
+    store = RunStore(root, str(tmp_path / "s.zarr"))
+    arrays = {k: np.arange(1000, dtype=np.uint16) * (i + 1) for i, k in enumerate("abcdefgh")}
+    logged.counter.clear()
+    store.write_unit("labels/parts/3/0", arrays)
+    calls = sum(logged.counter.values())
+    assert calls <= 32, dict(logged.counter)
+    assert logged.counter["set"] == 17  # 8 metadata, 8 chunks, the new group's own
+    store.write_unit("labels/parts/3/0", {"b": np.arange(5, dtype=np.int64)})
+    assert store.unit_arrays("labels/parts/3/0") == ["b"]
+    np.testing.assert_array_equal(store.read_unit("labels/parts/3/0")["b"], np.arange(5))
+    writer = store.unit_writer("tiles/5")  # grown with each flush
+    writer.append({"xyz": np.ones((3 * CHUNK_POINTS // 2, 3), np.int32)})
+    writer.close({"rgb": np.zeros((0, 3), np.uint16)})
+    got = store.read_unit("tiles/5")
+    assert got["xyz"].shape == (3 * CHUNK_POINTS // 2, 3)
+    assert (got["xyz"] == 1).all()
+    assert got["rgb"].shape == (0, 3)
+    assert got["rgb"].dtype == np.uint16
+    assert zarr.open_group(tmp_path / "s.zarr", mode="r")["tiles/5/xyz"].metadata.codecs[1].cname.value == "lz4"

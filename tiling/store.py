@@ -29,8 +29,10 @@ import numpy.typing as npt
 import zarr
 from numcodecs import Blosc
 from zarr.codecs import BloscCodec, BytesCodec
+from zarr.core.array import AsyncArray
 from zarr.core.buffer import default_buffer_prototype
 from zarr.core.sync import sync
+from zarr.storage import MemoryStore, StorePath
 
 from tiling.errors import ConfigError, InputFileError, PipelineError
 
@@ -58,6 +60,30 @@ def _fragment_codec(itemsize: int) -> Blosc:
 
 class StoreError(PipelineError, ValueError):
     """The run store is missing, of another schema version, or cannot be written."""
+
+
+def _new_array(group: zarr.Group, name: str, *, shape: tuple[int, ...], dtype: Any,
+               chunks: tuple[int, ...]) -> zarr.Array:
+    """Array ``name`` of ``group``, new: where the caller has made sure no node is (a
+    fresh or emptied group), its ``zarr.json`` is written as one object.
+
+    Zarr's own ``create_array`` probes every level above the array and rewrites each
+    missing parent (two to four requests a level, plus a listing for ``overwrite``):
+    about 28 requests for an array of ``labels/parts/<tile>/<part>`` on an object store,
+    against one here. The metadata is Zarr's own for these settings (an array made in
+    memory); the chunks are written as Zarr writes them.
+    """
+    template = zarr.create_array(store=MemoryStore(), shape=shape, dtype=dtype, chunks=chunks,
+                                 compressors=_COMPRESSOR, fill_value=0)
+    path = f"{group.path}/{name}" if group.path else name
+    store_path = StorePath(group.store_path.store, path)
+    docs = template.metadata.to_buffer_dict(default_buffer_prototype())
+
+    async def put_all() -> None:
+        await asyncio.gather(*((store_path / key).set(value) for key, value in docs.items()))
+
+    sync(put_all())
+    return zarr.Array(AsyncArray(template.metadata, store_path, config=template._async_array.config))
 
 
 def _is_url(url: str) -> bool:
@@ -171,19 +197,11 @@ class RunStore:
         """Write ``arrays`` into group path ``group`` (replacing what was there)."""
         g = self._require_group(group)
         for name in list(g.array_keys()):
-            if name not in arrays:
-                del g[name]
+            del g[name]
         for name, values in arrays.items():
             values = np.ascontiguousarray(values)
-            chunks = (CHUNK_POINTS,) + values.shape[1:]
-            arr = g.create_array(
-                name,
-                shape=values.shape,
-                dtype=values.dtype,
-                chunks=chunks,
-                compressors=_COMPRESSOR,
-                overwrite=True,
-            )
+            arr = _new_array(g, name, shape=values.shape, dtype=values.dtype,
+                             chunks=(CHUNK_POINTS,) + values.shape[1:])
             if values.size:
                 arr[...] = values
 
@@ -216,8 +234,9 @@ class RunStore:
         """
         group, _, name = path.rpartition("/")
         g = self._require_group(group) if group else self._root
-        g.create_array(name, shape=shape, dtype=dtype, chunks=(chunks, *shape[1:]),
-                       compressors=_COMPRESSOR, fill_value=0, overwrite=True)
+        if name in g:
+            del g[name]
+        _new_array(g, name, shape=shape, dtype=dtype, chunks=(chunks, *shape[1:]))
 
     def write_slice(self, path: str, start: int, values: npt.NDArray[Any]) -> None:
         """Write ``values`` at rows ``[start, start + len(values))`` of the array at
@@ -432,10 +451,9 @@ class _UnitWriter:
         self._n_written: dict[str, int] = {}
 
     def _create(self, name: str, values: npt.NDArray[Any]) -> zarr.Array:
-        arr = self._group.create_array(
-            name, shape=(self._n_rows or 0, *values.shape[1:]), dtype=values.dtype,
-            chunks=(CHUNK_POINTS, *values.shape[1:]), compressors=_COMPRESSOR, overwrite=True,
-        )
+        # The group was emptied by RunStore.unit_writer: no node is at ``name``.
+        arr = _new_array(self._group, name, shape=(self._n_rows or 0, *values.shape[1:]), dtype=values.dtype,
+                         chunks=(CHUNK_POINTS, *values.shape[1:]))
         self._arrays[name] = arr
         self._pending[name], self._n_pending[name], self._n_written[name] = [], 0, 0
         return arr

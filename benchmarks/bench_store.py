@@ -1,0 +1,97 @@
+"""Requests and time to write a run store's units on an object store (a local moto S3
+server), side by side in one run: Zarr's own ``create_array`` (what ``RunStore`` called
+before 2026-11-27) against ``RunStore.write_unit`` (one metadata object per array).
+
+Each unit is a labels part, ``labels/parts/<tile>/<part>``: eight arrays of ``--rows``
+rows, the same for both ways. The requests are those the server answered (one line of its
+log each). The moto server runs on this machine, so its time per request is far below a
+real object store's (tens of milliseconds): the request count is the figure that carries.
+
+Run: ``python benchmarks/bench_store.py [--units 24] [--rows 20000]``. Needs the dev
+dependencies ``moto[server]`` and ``s3fs``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+NAMES = ("class", "segment", "instance", "primitive", "leaf", "node", "group", "score")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--units", type=int, default=24)
+    ap.add_argument("--rows", type=int, default=20_000)
+    args = ap.parse_args()
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from tiling.store import _COMPRESSOR, CHUNK_POINTS, RunStore
+
+    port = _free_port()
+    log = Path(tempfile.mkdtemp()) / "moto.log"
+    with open(log, "w") as fh:
+        server = subprocess.Popen([sys.executable, "-m", "moto.server", "-H", "127.0.0.1", "-p", str(port)],
+                                  stdout=fh, stderr=subprocess.STDOUT)
+    os.environ.update(AWS_ACCESS_KEY_ID="test", AWS_SECRET_ACCESS_KEY="test", AWS_DEFAULT_REGION="us-east-1",
+                      AWS_ENDPOINT_URL=f"http://127.0.0.1:{port}")
+    try:
+        for _ in range(100):
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+                break
+            except OSError:
+                time.sleep(0.1)
+        import s3fs
+
+        s3fs.S3FileSystem().mkdir("bench")
+        rng = np.random.default_rng(0)
+        units = [{k: rng.integers(0, 1000, args.rows).astype(np.uint32) for k in NAMES} for _ in range(args.units)]
+
+        def requests() -> int:
+            return sum(1 for line in log.read_text().splitlines() if '" 20' in line or '" 40' in line)
+
+        def zarr_way(store: RunStore, group: str, arrays: dict[str, np.ndarray]) -> None:
+            g = store._require_group(group)
+            for name, values in arrays.items():
+                arr = g.create_array(name, shape=values.shape, dtype=values.dtype, chunks=(CHUNK_POINTS,),
+                                     compressors=_COMPRESSOR, overwrite=True)
+                arr[...] = values
+
+        rows = []
+        for way, write in (("zarr create_array", zarr_way), ("RunStore.write_unit", RunStore.write_unit)):
+            url = f"s3://bench/{way.split()[0].lower()}.zarr"
+            store = RunStore.create(url, attrs={})
+            before, t0 = requests(), time.perf_counter()
+            for i, arrays in enumerate(units):
+                write(store, f"labels/parts/{i // 4}/{i % 4}", arrays)
+            seconds, n = time.perf_counter() - t0, requests() - before
+            back = RunStore.open(url).read_unit(f"labels/parts/{(args.units - 1) // 4}/{(args.units - 1) % 4}")
+            assert all(np.array_equal(back[k], units[-1][k]) for k in NAMES), way
+            rows.append((way, n, seconds))
+    finally:
+        server.kill()
+        server.wait()
+    print(f"{args.units} units of {len(NAMES)} arrays x {args.rows:,} rows on a moto S3 server")
+    print(f"{'way':22s} {'requests':>9s} {'per array':>10s} {'s':>7s}")
+    for way, n, seconds in rows:
+        print(f"{way:22s} {n:9,d} {n / (args.units * len(NAMES)):10.1f} {seconds:7.2f}")
+    (_, n0, s0), (_, n1, s1) = rows
+    print(f"requests ratio (write_unit / zarr): {n1 / n0:.2f}; time ratio: {s1 / s0:.2f}")
+
+
+if __name__ == "__main__":
+    main()
