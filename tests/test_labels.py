@@ -28,9 +28,22 @@ SHALLOW = "{enabled: true, max_depth: 1}"
 
 
 @pytest.fixture(scope="module")
-def shallow(tmp_path_factory, scan):
-    """The plain run with the SHALLOW tree, once for the tests that compare with it (read only)."""
-    return _run(tmp_path_factory.mktemp("shallow"), scan, tree=SHALLOW)
+def shallow_run(tmp_path_factory, scan):
+    """The plain run with the SHALLOW tree, once for the tests that compare with it (read
+    only): its folder, (store, labels) and how many times it replaced the workers."""
+    import pipeline.graph
+
+    calls: list[int] = []
+    path = tmp_path_factory.mktemp("shallow")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(pipeline.graph, "fresh_workers", lambda runner: calls.append(1))
+        result = _run(path, scan, tree=SHALLOW)
+    return path, result, len(calls)
+
+
+@pytest.fixture(scope="module")
+def shallow(shallow_run):
+    return shallow_run[1]
 
 
 @pytest.fixture(scope="module")
@@ -267,17 +280,19 @@ def test_frame_joins_reach_labels(tmp_path, scan, shallow, monkeypatch):
     np.testing.assert_array_equal(got["instance"][rest], plain["instance"][rest])
 
 
-def test_workers_are_replaced_after_each_stage_that_ran_tasks(tmp_path, scan, monkeypatch):
+def test_workers_are_replaced_after_each_stage_that_ran_tasks(tmp_path, scan, shallow_run, monkeypatch):
     """``hollowtree run`` hands each stage fresh workers: after the ingest, the coarse
     stage and the tree when they ran tasks, never after a stage the store already
     records (a rerun with another tree parameter replaces them after the tree only)."""
+    import shutil
+
     import pipeline.graph
 
+    folder, _, n_fresh = shallow_run
+    assert n_fresh == 3  # the SHALLOW run from an empty store
+    shutil.copytree(folder / "s.zarr", tmp_path / "s.zarr")  # the shared store stays as it is
     calls: list[int] = []
     monkeypatch.setattr(pipeline.graph, "fresh_workers", lambda runner: calls.append(1))
-    _run(tmp_path, scan, tree=SHALLOW)
-    assert len(calls) == 3
-    calls.clear()
     _run(tmp_path, scan, tree="{enabled: true, max_depth: 2}")
     assert len(calls) == 1
     calls.clear()

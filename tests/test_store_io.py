@@ -121,3 +121,18 @@ def test_arrays_are_made_with_few_store_requests(tmp_path):
     assert got["rgb"].shape == (0, 3)
     assert got["rgb"].dtype == np.uint16
     assert zarr.open_group(tmp_path / "s.zarr", mode="r")["tiles/5/xyz"].metadata.codecs[1].cname.value == "lz4"
+
+
+def test_records_skip_a_unit_killed_before_its_record(store, tmp_path, recwarn):
+    """A record is one object written after its unit's data: a writer killed before it
+    leaves a unit folder without its zarr.json (and a local store's temporary file),
+    which counts as not done, without a warning; the other records read whole."""
+    store.record("coarse", "3", {"params_hash": "abc", "n_points": 5})
+    store.record("coarse", "4", {"params_hash": "abc", "n_points": 7})
+    base = tmp_path / "s.zarr" / "records" / "coarse"
+    (base / "5").mkdir()  # killed before its zarr.json
+    (base / "zarr.0123abcd.partial").write_bytes(b"{")  # killed mid-write
+    assert store.records("coarse") == {"3": {"params_hash": "abc", "n_points": 5},
+                                       "4": {"params_hash": "abc", "n_points": 7}}
+    assert store.records("tree") == {}
+    assert not [w for w in recwarn if "not recognized" in str(w.message)]
