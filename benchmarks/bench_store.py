@@ -1,5 +1,5 @@
 """Requests and time to write a run store's units on an object store (a local moto S3
-server), side by side in one run: Zarr's own ``create_array`` (what ``RunStore`` called
+server) and in a local folder, side by side in one run: Zarr's own ``create_array`` (what ``RunStore`` called
 before 2026-11-27) against ``RunStore.write_unit`` (one metadata object per array).
 
 Each unit is a labels part, ``labels/parts/<tile>/<part>``: eight arrays of ``--rows``
@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import socket
 import subprocess
 import sys
@@ -71,26 +72,30 @@ def main() -> None:
                                      compressors=_COMPRESSOR, overwrite=True)
                 arr[...] = values
 
+        local = Path(tempfile.mkdtemp())
         rows = []
-        for way, write in (("zarr create_array", zarr_way), ("RunStore.write_unit", RunStore.write_unit)):
-            url = f"s3://bench/{way.split()[0].lower()}.zarr"
-            store = RunStore.create(url, attrs={})
-            before, t0 = requests(), time.perf_counter()
-            for i, arrays in enumerate(units):
-                write(store, f"labels/parts/{i // 4}/{i % 4}", arrays)
-            seconds, n = time.perf_counter() - t0, requests() - before
-            back = RunStore.open(url).read_unit(f"labels/parts/{(args.units - 1) // 4}/{(args.units - 1) % 4}")
-            assert all(np.array_equal(back[k], units[-1][k]) for k in NAMES), way
-            rows.append((way, n, seconds))
+        for where, base in (("moto S3", "s3://bench"), ("local folder", str(local))):
+            for way, write in (("zarr create_array", zarr_way), ("RunStore.write_unit", RunStore.write_unit)):
+                url = f"{base}/{way.split()[0].lower()}.zarr"
+                store = RunStore.create(url, attrs={})
+                before, t0 = requests(), time.perf_counter()
+                for i, arrays in enumerate(units):
+                    write(store, f"labels/parts/{i // 4}/{i % 4}", arrays)
+                seconds, n = time.perf_counter() - t0, requests() - before
+                back = RunStore.open(url).read_unit(f"labels/parts/{(args.units - 1) // 4}/{(args.units - 1) % 4}")
+                assert all(np.array_equal(back[k], units[-1][k]) for k in NAMES), way
+                rows.append((where, way, n, seconds))
+        shutil.rmtree(local)
     finally:
         server.kill()
         server.wait()
-    print(f"{args.units} units of {len(NAMES)} arrays x {args.rows:,} rows on a moto S3 server")
-    print(f"{'way':22s} {'requests':>9s} {'per array':>10s} {'s':>7s}")
-    for way, n, seconds in rows:
-        print(f"{way:22s} {n:9,d} {n / (args.units * len(NAMES)):10.1f} {seconds:7.2f}")
-    (_, n0, s0), (_, n1, s1) = rows
-    print(f"requests ratio (write_unit / zarr): {n1 / n0:.2f}; time ratio: {s1 / s0:.2f}")
+    print(f"{args.units} units of {len(NAMES)} arrays x {args.rows:,} rows")
+    print(f"{'store':13s} {'way':22s} {'requests':>9s} {'per array':>10s} {'s':>7s}")
+    for where, way, n, seconds in rows:
+        count = f"{n:9,d} {n / (args.units * len(NAMES)):10.1f}" if where == "moto S3" else f"{'-':>9s} {'-':>10s}"
+        print(f"{where:13s} {way:22s} {count} {seconds:7.2f}")
+    (_, _, n0, s0), (_, _, n1, s1), (_, _, _, l0), (_, _, _, l1) = rows
+    print(f"write_unit / zarr: S3 requests {n1 / n0:.2f}, S3 time {s1 / s0:.2f}, local time {l1 / l0:.2f}")
 
 
 if __name__ == "__main__":
