@@ -70,9 +70,9 @@ def _new_array(group: zarr.Group, name: str, *, shape: tuple[int, ...], dtype: A
 
     Zarr's own ``create_array`` probes every level above the array and rewrites each
     missing parent (two to four requests a level, plus a listing for ``overwrite``):
-    about 28 requests for an array of ``labels/parts/<tile>/<part>`` on an object store,
-    against one here. The metadata is Zarr's own for these settings (an array made in
-    memory); the chunks are written as Zarr writes them.
+    about 24 requests for an array of ``labels/parts/<tile>/<part>`` on an object store,
+    its chunk included (``benchmarks/bench_store.py``), against this one object and the
+    chunk. The metadata is Zarr's own for these settings (an array made in memory).
     """
     template = zarr.create_array(store=MemoryStore(), shape=shape, dtype=dtype, chunks=chunks,
                                  compressors=_COMPRESSOR, fill_value=0)
