@@ -130,6 +130,38 @@ def test_voxel_downsampling_maps_every_dropped_point(scan_file, tmp_path):
     assert len(kept) < 0.8 * n
 
 
+@pytest.mark.parametrize("spread", [50_000, 2**30])
+@pytest.mark.parametrize("sorted_index", [True, False])
+def test_voxel_representatives_match_the_lexicographic_sort(spread, sorted_index):
+    """The packed-key sort (index increasing, ranges within 63 bits) and the lexicographic
+    fallback give the same keep-mask and representatives as a plain lexsort."""
+    from tiling.ingest import _voxel_representatives
+
+    rng = np.random.default_rng(spread)
+    n = 20_000
+    xyz = rng.integers(-spread, spread, (n, 3)).astype(np.int64)
+    xyz[: n // 2] %= 100  # many points per voxel (and, with 2**30, ranges beyond 63 bits)
+    index = rng.choice(10**9, n, replace=False).astype(np.uint64)
+    if sorted_index:
+        index.sort()
+    core_tile = rng.integers(0, 4, n).astype(np.int64)
+    scale, voxel = np.array([0.001, 0.001, 0.002]), 0.02
+    keep, rep = _voxel_representatives(xyz, index, core_tile, scale=scale, voxel=voxel)
+    key = np.floor(xyz * (scale / voxel)).astype(np.int64)
+    order = np.lexsort((index, core_tile, key[:, 2], key[:, 1], key[:, 0]))
+    k, c = key[order], core_tile[order]
+    first = np.r_[True, np.any(k[1:] != k[:-1], axis=1) | (c[1:] != c[:-1])]
+    want = np.empty(n, dtype=np.int64)
+    want[order] = order[np.flatnonzero(first)][np.cumsum(first) - 1]
+    np.testing.assert_array_equal(rep, want)
+    np.testing.assert_array_equal(keep, np.isin(np.arange(n), want))
+    assert 0 < keep.sum() < n
+    # the representative is the lowest index of its voxel and tile
+    low = np.full(n, np.iinfo(np.uint64).max, dtype=np.uint64)
+    np.minimum.at(low, want, index)
+    np.testing.assert_array_equal(low[want], index[want])
+
+
 def test_bbox_subset(scan_file, tmp_path):
     las = laspy.read(scan_file)
     x, y = float(np.median(las.x)), float(np.median(las.y))

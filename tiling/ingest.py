@@ -437,17 +437,44 @@ def _voxel_representatives(
     *, scale: npt.NDArray[np.float64], voxel: float,
 ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.int64]]:
     """Keep-mask (one point per voxel and core tile: the lowest index) and, for every
-    point, the row of its representative."""
+    point, the row of its representative.
+
+    The rows are ordered by voxel, core tile and index. Where ``index`` is increasing (the
+    reduce's batches are sorted by it) and the voxel and tile numbers fit in 63 bits
+    together, that order is a stable sort of one packed integer key: the lexicographic
+    sort's order to the row, about 4x faster (docs/benchmarks.md).
+    """
     key = np.floor(xyz * (scale / voxel)).astype(np.int64)
-    order = np.lexsort((index, core_tile, key[:, 2], key[:, 1], key[:, 0]))
-    k, c = key[order], core_tile[order]
-    first = np.r_[True, np.any(k[1:] != k[:-1], axis=1) | (c[1:] != c[:-1])]
+    cols = (key[:, 0], key[:, 1], key[:, 2], core_tile)
+    packed = _packed_key(cols) if len(index) > 1 and bool(np.all(index[1:] > index[:-1])) else None
+    if packed is None:
+        order = np.lexsort((index, *cols[::-1]))
+        k, c = key[order], core_tile[order]
+        first = np.r_[True, np.any(k[1:] != k[:-1], axis=1) | (c[1:] != c[:-1])]
+    else:
+        order = np.argsort(packed, kind="stable")  # ties stay in index order
+        p = packed[order]
+        first = np.r_[True, p[1:] != p[:-1]]
     group_first = order[np.flatnonzero(first)]
     rep = np.empty(len(index), dtype=np.int64)
     rep[order] = group_first[np.cumsum(first) - 1]
     keep = np.zeros(len(index), dtype=bool)
     keep[group_first] = True
     return keep, rep
+
+
+def _packed_key(cols: Sequence[npt.NDArray[np.int64]]) -> npt.NDArray[np.int64] | None:
+    """One int64 per row that orders the rows as ``cols`` do lexicographically (first
+    column first), or None where their ranges need more than 63 bits together."""
+    lows = [int(c.min()) for c in cols]
+    bits = [max(1, (int(c.max()) - lo).bit_length()) for c, lo in zip(cols, lows, strict=True)]
+    if sum(bits) > 63:
+        return None
+    packed = np.zeros(len(cols[0]), dtype=np.int64)
+    for c, lo, b in zip(cols, lows, bits, strict=True):
+        packed <<= b
+        packed |= c - lo
+    return packed
 
 
 def reduce_tile(url: str, tile: int, keys: Sequence[str], plan_attrs: dict[str, Any]) -> int:
