@@ -139,7 +139,25 @@ class in_child:  # noqa: N801  (used like a function: ``runner(in_child(fn), ...
             return self.fn(*args)
         if self.prepare is not None:
             self.prepare()
-        return _run_in_child(self.fn, args)
+        return _run_in_child(self.fn, args, limit=_memory_limit())
+
+
+def _memory_limit() -> int | None:
+    """Bytes this worker and its task's child may hold together before the child is
+    stopped: Dask's ``distributed.worker.memory.terminate`` fraction of the worker's memory
+    limit, the line at which Dask's nanny kills a worker (whose monitor sees the worker's
+    own memory, not its children's). None where either is off or not in a worker."""
+    try:
+        import dask
+        from distributed import get_worker
+
+        limit = get_worker().memory_manager.memory_limit
+        fraction = dask.config.get("distributed.worker.memory.terminate")
+    except (ImportError, ValueError, AttributeError, KeyError):
+        return None
+    if not limit or not fraction:
+        return None
+    return int(limit * float(fraction))
 
 
 def _forks_here() -> bool:
@@ -166,9 +184,11 @@ def _die_with_parent() -> None:
         pass
 
 
-def _run_in_child(fn: Callable[..., Any], args: tuple[Any, ...]) -> Any:
+def _run_in_child(fn: Callable[..., Any], args: tuple[Any, ...], *, limit: int | None = None) -> Any:
     """``fn(*args)`` in a forked child; its result, or its exception raised here with the
-    child's traceback as a note."""
+    child's traceback as a note. With ``limit`` (bytes), the child is killed, and the task
+    fails saying so, once its own pages (USS) and the worker's resident memory add up to
+    more: the memory a nanny would stop the worker at (:func:`_memory_limit`)."""
     name = getattr(fn, "__name__", "task")
     parent = os.getpid()
     r, w = os.pipe()
@@ -202,9 +222,15 @@ def _run_in_child(fn: Callable[..., Any], args: tuple[Any, ...]) -> Any:
             finally:
                 os._exit(status)
     os.close(w)
-    with os.fdopen(r, "rb") as f:
-        payload = f.read()
+    payload, used = _read_result(r, pid, limit)
     _, status = os.waitpid(pid, 0)
+    if used is not None:
+        assert limit is not None
+        raise PipelineError(
+            f"task {name}: its child process was stopped at {used / 2**20:,.0f} MB (with its worker's), over "
+            f"the worker's memory limit ({limit / 2**20:,.0f} MB: distributed.worker.memory.terminate of "
+            "its memory_limit); give each worker more memory, or make the tasks smaller "
+            "(coarse.block_points, tree.batch_points)")
     if os.WIFSIGNALED(status) or os.WEXITSTATUS(status) != 0 or not payload:
         if os.WIFSIGNALED(status):
             sig = os.WTERMSIG(status)
@@ -219,6 +245,42 @@ def _run_in_child(fn: Callable[..., Any], args: tuple[Any, ...]) -> Any:
         return value
     value.add_note(f"in the task's child process (pid {pid}):\n{tb.rstrip()}")
     raise value
+
+
+#: Seconds between two looks at a task's child's memory (when the worker has a limit).
+_MEMORY_POLL_S = 0.25
+
+
+def _read_result(fd: int, pid: int, limit: int | None) -> tuple[bytes, int | None]:
+    """Everything the child writes to ``fd`` until it closes it, and None; or, with
+    ``limit``, whatever came before the child (``pid``) and its worker held more than
+    ``limit`` bytes together, and that figure (the child is then killed)."""
+    if limit is None:
+        with os.fdopen(fd, "rb") as f:
+            return f.read(), None
+    import select
+
+    import psutil
+
+    child, worker = psutil.Process(pid), psutil.Process()
+    chunks: list[bytes] = []
+    with os.fdopen(fd, "rb", buffering=0) as f:
+        while True:
+            ready, _, _ = select.select([f], [], [], _MEMORY_POLL_S)
+            if ready:
+                data = f.read(1 << 20)
+                if not data:
+                    return b"".join(chunks), None
+                chunks.append(data)
+                continue
+            try:
+                used = child.memory_full_info().uss + worker.memory_info().rss
+            except psutil.Error:  # the child is gone: its pipe ends at once
+                continue
+            if used > limit:
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(pid, signal.SIGKILL)
+                return b"".join(chunks), used
 
 
 def fresh_workers(runner: Runner) -> None:

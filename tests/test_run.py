@@ -364,3 +364,25 @@ def test_in_child_runs_each_task_in_a_child_of_its_worker_and_frees_its_memory()
         with pytest.raises(PipelineError, match="task _die: its child process was killed by signal 9"):
             run(in_child(_die), [()], "die")
         assert run(os.getpid, [()], "pid") == [worker]  # the worker itself lives on
+
+
+def test_in_child_task_over_the_worker_memory_limit_is_stopped():
+    """Dask's nanny watches its worker's memory, not the worker's children: a task's child
+    that takes the worker over the terminate line of its memory limit is killed, and the
+    task fails saying so; the worker lives on, and smaller tasks run as before."""
+    import logging
+
+    from distributed import Client, LocalCluster
+
+    from pipeline.graph import in_child
+    from tiling.errors import PipelineError
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, memory_limit="700MB", dashboard_address=":0",
+                      silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
+        worker = client.submit(os.getpid, pure=False).result()
+        assert client.submit(in_child(_hold_memory), 100, pure=False).result() > 100
+        with pytest.raises(PipelineError, match=r"task _hold_memory: its child process was stopped at [\d,]+ MB "
+                                                r"\(with its worker's\), over the worker's memory limit \(634 MB"):
+            client.submit(in_child(_hold_memory), 3000, pure=False).result()
+        assert client.submit(os.getpid, pure=False).result() == worker
+        assert client.submit(in_child(_hold_memory), 100, pure=False).result() > 100
