@@ -225,10 +225,9 @@ def _run_in_child(fn: Callable[..., Any], args: tuple[Any, ...], *, limit: int |
     payload, used = _read_result(r, pid, limit)
     _, status = os.waitpid(pid, 0)
     if used is not None:
-        assert limit is not None
         raise PipelineError(
             f"task {name}: its child process was stopped at {used / 2**20:,.0f} MB (with its worker's), over "
-            f"the worker's memory limit ({limit / 2**20:,.0f} MB: distributed.worker.memory.terminate of "
+            f"the worker's memory limit ({(limit or 0) / 2**20:,.0f} MB: distributed.worker.memory.terminate of "
             "its memory_limit); give each worker more memory, or make the tasks smaller "
             "(coarse.block_points, tree.batch_points)")
     if os.WIFSIGNALED(status) or os.WEXITSTATUS(status) != 0 or not payload:

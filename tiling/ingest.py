@@ -442,7 +442,8 @@ def _voxel_representatives(
     The rows are ordered by voxel, core tile and index. Where ``index`` is increasing (the
     reduce's batches are sorted by it) and the voxel and tile numbers fit in 63 bits
     together, that order is a stable sort of one packed integer key: the lexicographic
-    sort's order to the row, about 4x faster (docs/benchmarks.md).
+    sort's order to the row, in 0.58 of its time on a 10 M-point scan's batches (4x faster
+    on random points; docs/benchmarks.md).
     """
     key = np.floor(xyz * (scale / voxel)).astype(np.int64)
     cols = (key[:, 0], key[:, 1], key[:, 2], core_tile)
