@@ -6,7 +6,9 @@ and the outputs overridden, as a child command whose processes (the local Dask c
 workers included) are sampled every 0.2 s. Per stage (the lines the run prints as each
 stage ends) it reports seconds, input points per second per core, the peak resident
 memory of the largest single process, of all processes together and of the driver (the
-``hollowtree run`` process itself, which stitches). At the end it prints
+``hollowtree run`` process itself, which stitches), and how busy the machine's cores were
+(the share of all CPU time that was not idle; the benchmark should run alone, so this is
+how well the run keeps its cores fed). At the end it prints
 the issue's two ratios, measured side by side in this one run:
 
 - time per point at the largest size over time per point at the smallest (linear = 1);
@@ -34,12 +36,21 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import psutil
 from _procs import tree_rss
 
 REPO = Path(__file__).resolve().parents[1]
 STAGES = ("ingest", "coarse", "tree", "labels", "outputs")
+
+
+def _busy(a: Any, b: Any) -> float:
+    """Fraction of the machine's CPU time between two ``psutil.cpu_times()`` that was not idle."""
+    idle = (b.idle - a.idle) + (getattr(b, "iowait", 0.0) - getattr(a, "iowait", 0.0))
+    # Linux counts guest time inside user time as well: leave it out of the total.
+    total = sum(b) - sum(a) - sum(getattr(b, f, 0.0) - getattr(a, f, 0.0) for f in ("guest", "guest_nice"))
+    return 1.0 - idle / total if total > 0 else 0.0
 
 
 def measure(cmd: list[str]) -> tuple[int, float, list[dict[str, float]]]:
@@ -68,26 +79,30 @@ def measure(cmd: list[str]) -> tuple[int, float, list[dict[str, float]]]:
     th.start()
     rows: list[dict[str, float]] = []
     last = t0
+    cpu_last = psutil.cpu_times()
     assert child.stdout is not None
     for line in child.stdout:
         sys.stdout.write("    " + line)
         name = line.split(":")[0].strip()
         if name in STAGES and (not rows or rows[-1]["stage"] != name):
-            now = time.perf_counter()
+            now, cpu = time.perf_counter(), psutil.cpu_times()
             with lock:
                 rows.append({"stage": name, "seconds": now - last, "peak_process": peak["max"],
-                             "peak_sum": peak["sum"], "peak_driver": peak["driver"]})
+                             "peak_sum": peak["sum"], "peak_driver": peak["driver"],
+                             "busy": _busy(cpu_last, cpu)})
                 peak["max"], peak["sum"], peak["driver"] = 0, 0, 0
-            last = now
+            last, cpu_last = now, cpu
         elif name in STAGES:  # a second line of the same stage (outputs)
-            now = time.perf_counter()
+            now, cpu = time.perf_counter(), psutil.cpu_times()
             with lock:
+                rows[-1]["busy"] = ((rows[-1]["busy"] * rows[-1]["seconds"] + _busy(cpu_last, cpu) * (now - last))
+                                    / (rows[-1]["seconds"] + now - last))
                 rows[-1]["seconds"] += now - last
                 rows[-1]["peak_process"] = max(rows[-1]["peak_process"], peak["max"])
                 rows[-1]["peak_sum"] = max(rows[-1]["peak_sum"], peak["sum"])
                 rows[-1]["peak_driver"] = max(rows[-1]["peak_driver"], peak["driver"])
                 peak["max"], peak["sum"], peak["driver"] = 0, 0, 0
-            last = now
+            last, cpu_last = now, cpu
     child.wait()
     stop.set()
     th.join()
@@ -133,13 +148,13 @@ def main() -> None:
 
     print(f"\nmachine: {cores} cores, {psutil.virtual_memory().total / 2**30:.0f} GiB")
     print(f"{'points':>12} {'stage':<8}{'s':>9}{'pts/s/core':>12}{'peak proc MB':>14}{'peak sum MB':>13}"
-          f"{'driver MB':>11}")
+          f"{'driver MB':>11}{'busy %':>8}")
     for r in results:
         for row in r["stages"]:
             rate = r["points"] / row["seconds"] / cores if row["seconds"] > 0 else float("inf")
             print(f"{r['points']:>12,} {row['stage']:<8}{row['seconds']:>9.1f}{rate:>12,.0f}"
                   f"{row['peak_process'] / 2**20:>14.0f}{row['peak_sum'] / 2**20:>13.0f}"
-                  f"{row['peak_driver'] / 2**20:>11.0f}")
+                  f"{row['peak_driver'] / 2**20:>11.0f}{100 * row.get('busy', float('nan')):>8.0f}")
         peak = max(x["peak_process"] for x in r["stages"])
         print(f"{r['points']:>12,} {'total':<8}{r['wall_s']:>9.1f}{r['points'] / r['wall_s']:>12,.0f} pts/s "
               f"(all cores); peak process {peak / 2**20:.0f} MB")
