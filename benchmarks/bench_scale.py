@@ -15,6 +15,12 @@ the issue's two ratios, measured side by side in this one run:
 - peak single-process memory at each size over that at the size before it, the smallest
   left out (flat = 1; ``--sizes 1e6 1e7 1e8`` prints 100 M over 10 M).
 
+The machine's own speed is printed beside the figures: its CPU model, and before each run
+and after the last, a **reference read** (the same LAZ scan, the one nearest 10 M points,
+decoded by laspy on every core: raw points/s, no pipeline). Our machines are shared and
+change kind between sessions; the end-to-end rate over the reference read rate taken just
+before the run is a ratio that stays comparable where absolute rates do not.
+
 A "process" is a worker with the task it runs: a task's child process forked from its
 worker (``pipeline.graph.in_child``) counts with the worker, as its own pages (USS) on top
 of the worker's resident memory (``_procs.tree_rss``).
@@ -29,7 +35,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
+import platform
 import shutil
 import subprocess
 import sys
@@ -109,6 +117,31 @@ def measure(cmd: list[str]) -> tuple[int, float, list[dict[str, float]]]:
     return child.returncode, time.perf_counter() - t0, rows
 
 
+def cpu_model() -> str:
+    """The CPU's model name (Linux ``/proc/cpuinfo``; ``platform.processor()`` elsewhere)."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
+def reference_read(path: Path, min_seconds: float = 3.0) -> float:
+    """Points per second of plain ``laspy.read`` of ``path`` (its default LAZ backend, on
+    every core), reading it again until ``min_seconds`` have passed: the machine's speed
+    at this moment, on a fixed job."""
+    import laspy
+
+    n, t0 = 0, time.perf_counter()
+    while True:
+        n += len(laspy.read(path).points)
+        elapsed = time.perf_counter() - t0
+        if elapsed >= min_seconds:
+            return n / elapsed
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", nargs="+", type=float, default=[1e6, 1e7, 1e8])
@@ -122,8 +155,8 @@ def main() -> None:
     from tiling.readers import probe
 
     cores = os.cpu_count() or 1
-    results = []
-    for size in args.sizes:
+    runs = []
+    for size in args.sizes:  # every scan first (not timed), so the reference file exists
         n = int(size)
         store = REPO / "out" / f"scale-{n}.zarr"
         sets = [f"input.synth.points={n}", f"store={store}", "outputs.las=null", "outputs.png=null",
@@ -133,6 +166,14 @@ def main() -> None:
         made = make_synthetic_input(wf, progress=True)
         if made:
             print(f"{n:,} points: input made in {time.perf_counter() - t0:.1f} s (not counted)")
+        runs.append((n, store, sets, wf))
+    ref_wf = min(runs, key=lambda r: abs(math.log(r[0] / 1e7)))[3]
+    ref = Path(ref_wf.input.paths()[0])
+    print(f"reference read: {ref.name} (laspy, every core)")
+    results = []
+    for n, store, sets, wf in runs:
+        before = reference_read(ref)
+        print(f"{n:,} points: reference read {before / 1e6:.2f} M points/s")
         if store.exists():
             shutil.rmtree(store)
         cmd = [sys.executable, "-m", "pipeline.cli", "run", str(args.workflow), "--no-progress"]
@@ -143,10 +184,12 @@ def main() -> None:
         if rc != 0:
             raise SystemExit(f"run of {n:,} points failed with exit code {rc}")
         n_in = sum(probe(p).point_count for p in wf.input.paths())
-        results.append({"points": n_in, "wall_s": wall, "stages": rows})
+        results.append({"points": n_in, "wall_s": wall, "stages": rows, "reference_read": before})
         shutil.rmtree(store, ignore_errors=True)
+    after = reference_read(ref)
+    print(f"after the last run: reference read {after / 1e6:.2f} M points/s")
 
-    print(f"\nmachine: {cores} cores, {psutil.virtual_memory().total / 2**30:.0f} GiB")
+    print(f"\nmachine: {cpu_model()}, {cores} cores, {psutil.virtual_memory().total / 2**30:.0f} GiB")
     print(f"{'points':>12} {'stage':<8}{'s':>9}{'pts/s/core':>12}{'peak proc MB':>14}{'peak sum MB':>13}"
           f"{'driver MB':>11}{'busy %':>8}")
     for r in results:
@@ -156,8 +199,10 @@ def main() -> None:
                   f"{row['peak_process'] / 2**20:>14.0f}{row['peak_sum'] / 2**20:>13.0f}"
                   f"{row['peak_driver'] / 2**20:>11.0f}{100 * row.get('busy', float('nan')):>8.0f}")
         peak = max(x["peak_process"] for x in r["stages"])
-        print(f"{r['points']:>12,} {'total':<8}{r['wall_s']:>9.1f}{r['points'] / r['wall_s']:>12,.0f} pts/s "
-              f"(all cores); peak process {peak / 2**20:.0f} MB")
+        rate = r["points"] / r["wall_s"]
+        print(f"{r['points']:>12,} {'total':<8}{r['wall_s']:>9.1f}{rate:>12,.0f} pts/s "
+              f"(all cores); peak process {peak / 2**20:.0f} MB; over the reference read "
+              f"({r['reference_read'] / 1e6:.2f} M/s) {rate / r['reference_read']:.3f}")
     if len(results) >= 2:
         a, b = results[0], results[-1]
         lin = (b["wall_s"] / b["points"]) / (a["wall_s"] / a["points"])
@@ -170,7 +215,8 @@ def main() -> None:
             pk = max(x["peak_process"] for x in b["stages"]) / max(x["peak_process"] for x in c["stages"])
             print(f"peak single-process memory, {b['points']:,} over {c['points']:,}: {pk:.2f} (flat = 1)")
     if args.json:
-        args.json.write_text(json.dumps({"cores": cores, "results": results}, indent=1))
+        args.json.write_text(json.dumps({"cores": cores, "cpu": cpu_model(), "reference_file": ref.name,
+                                         "reference_read_after": after, "results": results}, indent=1))
 
 
 if __name__ == "__main__":
