@@ -17,7 +17,8 @@ the issue's two ratios, measured side by side in this one run:
 
 The machine's own speed is printed beside the figures: its CPU model, and before each run
 and after the last, a **reference read** (the same LAZ scan, the one nearest 10 M points,
-decoded by laspy on every core: raw points/s, no pipeline). Our machines are shared and
+decoded by laspy on every core: raw points/s, no pipeline; ``--reference PATH`` names
+another, e.g. the 10 M-point scan when only ``--sizes 1e8`` runs). Our machines are shared and
 change kind between sessions; the end-to-end rate over the reference read rate taken just
 before the run is a ratio that stays comparable where absolute rates do not.
 
@@ -148,6 +149,8 @@ def main() -> None:
     ap.add_argument("--workflow", type=Path, default=REPO / "workflows" / "local.yaml")
     ap.add_argument("--set", dest="overrides", action="append", default=[])
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--reference", type=Path, default=None,
+                    help="LAZ/LAS file of the reference read (default: the scan nearest 10 M points)")
     args = ap.parse_args()
     sys.path.insert(0, str(REPO))
     from pipeline.run import make_synthetic_input
@@ -167,8 +170,13 @@ def main() -> None:
         if made:
             print(f"{n:,} points: input made in {time.perf_counter() - t0:.1f} s (not counted)")
         runs.append((n, store, sets, wf))
-    ref_wf = min(runs, key=lambda r: abs(math.log(r[0] / 1e7)))[3]
-    ref = Path(ref_wf.input.paths()[0])
+    if args.reference is not None:
+        if not args.reference.is_file():
+            ap.error(f"--reference {args.reference}: no such file")
+        ref = args.reference
+    else:
+        ref_wf = min(runs, key=lambda r: abs(math.log(r[0] / 1e7)))[3]
+        ref = Path(ref_wf.input.paths()[0])
     print(f"reference read: {ref.name} (laspy, every core)")
     results = []
     for n, store, sets, wf in runs:
