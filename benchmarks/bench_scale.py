@@ -152,6 +152,8 @@ def main() -> None:
     ap.add_argument("--reference", type=Path, default=None,
                     help="LAZ/LAS file of the reference read (default: the scan nearest 10 M points)")
     args = ap.parse_args()
+    if args.reference is not None and not args.reference.is_file():
+        ap.error(f"--reference {args.reference}: no such file")
     sys.path.insert(0, str(REPO))
     from pipeline.run import make_synthetic_input
     from pipeline.workflow import load_workflow
@@ -171,8 +173,6 @@ def main() -> None:
             print(f"{n:,} points: input made in {time.perf_counter() - t0:.1f} s (not counted)")
         runs.append((n, store, sets, wf))
     if args.reference is not None:
-        if not args.reference.is_file():
-            ap.error(f"--reference {args.reference}: no such file")
         ref = args.reference
     else:
         ref_wf = min(runs, key=lambda r: abs(math.log(r[0] / 1e7)))[3]
