@@ -25,6 +25,7 @@ import torch
 from hollownet.model import DEFAULT_WEIGHTS, OUTPUT_CLASSES, load_model
 from hollownet.voxels import GRID_SIZE, voxelize_batch
 from tiling.classes import ClassId
+from tiling.columns import column_span
 from tiling.errors import ConfigError
 
 __all__ = ["Classifier", "Prediction", "default_threads"]
@@ -151,7 +152,7 @@ class Classifier:
             return False
         if not np.isfinite(xyz).all():
             return False
-        return bool(np.ptp(xyz, axis=0).max() > 0)
+        return bool(column_span(xyz).max() > 0)
 
     def predict(self, segments: Sequence[npt.ArrayLike]) -> Prediction:
         """Classify each segment (an ``(n_points, 3)`` array of coordinates).

@@ -18,6 +18,7 @@ import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 from primitives._validation import as_xyz
+from tiling.columns import column_max, column_min
 from tiling.errors import ConfigError
 
 __all__ = ["box_plane_distance", "large_segments", "segment_contacts", "segment_contacts_chunked", "set_in_plane",
@@ -27,8 +28,8 @@ __all__ = ["box_plane_distance", "large_segments", "segment_contacts", "segment_
 def _first_per_voxel(v: npt.NDArray[np.int64], segment: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
     """Row of the first point of each (voxel, segment) pair, ascending; ``v`` are integer
     voxel coordinates ``(n, 3)``."""
-    v = v - v.min(axis=0)
-    dims = v.max(axis=0) + 1
+    v = v - column_min(v)
+    dims = column_max(v) + 1
     n_seg = int(segment.max()) + 1
     if float(np.prod(dims.astype(np.float64))) * n_seg < 2.0**62:
         key = ((v[:, 0] * dims[1] + v[:, 1]) * dims[2] + v[:, 2]) * n_seg + segment

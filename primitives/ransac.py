@@ -102,6 +102,7 @@ from primitives.shapes import (
     surface_coordinates,
     to_fit,
 )
+from tiling.columns import column_max, column_min, column_span
 from tiling.errors import ConfigError
 
 __all__ = ["RansacParams", "RansacResult", "efficient_ransac"]
@@ -320,8 +321,8 @@ def _largest_component(uvs: list[F64], cell: float) -> npt.NDArray[np.bool_]:
     """
     labs, offset = [], 0
     for uv in uvs:
-        q = np.floor((uv - uv.min(axis=0)) / cell).astype(np.int64)
-        shape = q.max(axis=0) + 1
+        q = np.floor((uv - column_min(uv)) / cell).astype(np.int64)
+        shape = column_max(q) + 1
         cells = float(shape[0]) * float(shape[1])
         if cells > SPARSE_FACTOR * len(q):
             lab_pts, n_lab = _label_sparse(q)
@@ -372,8 +373,8 @@ class _Search:
         self.n_alive = m
         self.k = max(MINIMAL_SET_SIZE[k] for k in kinds)
         # Octree as one Morton order: every cell of every level is a contiguous run.
-        lo = P.min(axis=0)
-        self.size = float(np.ptp(P, axis=0).max()) * (1 + 1e-9) + 1e-12
+        lo = column_min(P)
+        self.size = float(column_span(P).max()) * (1 + 1e-9) + 1e-12
         self.depth = int(np.clip(math.floor(math.log2(self.size / max(cluster_epsilon, 3 * epsilon))), 1, 20))
         self.n_levels = self.depth + 1
         q = np.minimum((P - lo) / self.size * (1 << self.depth), (1 << self.depth) - 1).astype(np.uint64)

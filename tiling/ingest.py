@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from tiling.columns import column_max, column_min
 from tiling.errors import ConfigError, CorruptInputError
 from tiling.grid import TileGrid
 from tiling.kernels import morton_index_order, quantise, route_groups, split_rows
@@ -227,8 +228,8 @@ def _source_bounds(info: SourceInfo, chunk_size: int) -> tuple[np.ndarray, np.nd
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for block in read_blocks(info.path, chunk_size=chunk_size):
         if len(block.xyz):
-            lo = np.minimum(lo, block.xyz.min(axis=0))
-            hi = np.maximum(hi, block.xyz.max(axis=0))
+            lo = np.minimum(lo, column_min(block.xyz))
+            hi = np.maximum(hi, column_max(block.xyz))
     return lo, hi
 
 

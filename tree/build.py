@@ -24,6 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tiling.classes import ELEMENT_CLASSES, ClassId
+from tiling.columns import column_max, column_min, column_span
 from tree.energy import Classifier, EnergyModel, energy_terms, load_energy_model
 from tree.operators import RngLike, h
 from tree.sequences import (
@@ -195,11 +196,11 @@ def _solid_share(pts: FloatArray, params: SequenceParams) -> float:
     0.98
     """
     tz = h(pts)
-    ext = np.ptp(tz, axis=0)
+    ext = column_span(tz)
     # Cells of twice the mean point spacing at least, so a sparse plain wall fills them too.
     cell = max(params.cell if params.cell > 0 else 0.1, 2.0 * float(np.sqrt(ext[0] * ext[1] / max(len(pts), 1))))
-    k = np.floor((tz - tz.min(axis=0)) * (1.0 / cell)).astype(np.int64)
-    n = k.max(axis=0) + 1
+    k = np.floor((tz - column_min(tz)) * (1.0 / cell)).astype(np.int64)
+    n = column_max(k) + 1
     return len(np.unique(k[:, 0] * n[1] + k[:, 1])) / float(n[0] * n[1])
 
 
@@ -332,7 +333,7 @@ def build_tree(
         cand: list[tuple[Proposal, FloatArray, IntArray, FloatArray, FloatArray]] = []
         feats: list[FloatArray] = []
         k = 0
-        extent = np.ptp(pts, axis=0) if split is not None else None
+        extent = column_span(pts) if split is not None else None
         for key, pr in props:
             s = pr.n_children
             c_cls, c_sc, c_pr = all_cls[k:k + s], all_sc[k:k + s], all_pr[k:k + s]

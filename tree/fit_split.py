@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from tiling.columns import column_span
 from tree.build import _is_flat
 from tree.energy import Classifier
 from tree.sequences import SequenceParams, propose
@@ -181,7 +182,7 @@ def proposal_samples(
             pc = int(np.asarray(pcls).reshape(-1)[0])
             cc = np.asarray(ccls, dtype=np.int64).reshape(-1)
             sp = np.unique(parts[idx], return_inverse=True)[1].reshape(-1).astype(np.int64)
-            ext = np.ptp(sub, axis=0)
+            ext = column_span(sub)
             j = 0
             for key, p, rs in props:
                 s = p.n_children

@@ -53,6 +53,7 @@ from collections.abc import Mapping
 import numpy as np
 import numpy.typing as npt
 
+from tiling.columns import column_max, column_min
 from tree.rows import ArcadeCells, _bay, _wpct
 
 __all__ = ["frame_cells", "FACE_DEPTH", "FACE_WIDE", "PIECE_DEPTH", "JAMB_SHARE", "GAP"]
@@ -162,7 +163,7 @@ def frame_cells(arches: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]],
     W = {int(i): (np.asarray(p, dtype=np.float64).reshape(-1, 3), np.asarray(w, dtype=np.float64))
          for i, (p, w) in walls.items() if len(np.asarray(w))}
     joined: dict[int, int] = {}
-    box = {k: (p[:, :3].min(axis=0), p[:, :3].max(axis=0)) for k, (p, _) in (A | W).items()}
+    box = {k: (column_min(p[:, :3]), column_max(p[:, :3])) for k, (p, _) in (A | W).items()}
 
     def close(i: int, j: int, pad: float) -> bool:
         return bool(np.all(box[i][0] - pad <= box[j][1]) and np.all(box[j][0] <= box[i][1] + pad))

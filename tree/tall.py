@@ -51,6 +51,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tiling.classes import ClassId
+from tiling.columns import column_span
 
 __all__ = ["DOME_MAX_SLENDERNESS", "MIN_FOOTPRINT_RATIO", "NotClutter", "TallPillars", "footprint_ratio",
            "not_clutter", "short_minarets", "size_rules", "slender_domes", "tall_pillars"]
@@ -246,7 +247,7 @@ class NotClutter:
         pred = self.classifier.predict(segments)
         cls, score, prob = pred
         lo = np.array([float(s[:, 2].min()) if len(s) else np.nan for s in segments])
-        size = np.array([float(np.ptp(s, axis=0).max()) if len(s) else 0.0 for s in segments])
+        size = np.array([float(column_span(s).max()) if len(s) else 0.0 for s in segments])
         if self.ground is not None and self.ground.size not in (1, len(lo)):
             raise ValueError(f"The 'ground' parameter of NotClutter must be one value or one per part ({len(lo)}). "
                              f"Got {self.ground.size} instead.")
