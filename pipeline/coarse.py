@@ -927,6 +927,11 @@ def _set_in_walls(ra: np.ndarray, rb: np.ndarray, cnt: np.ndarray, large: np.nda
     return {s_: w for s_, (_, w) in sorted(best.items())}
 
 
+def _joined(parts: list[np.ndarray]) -> np.ndarray:
+    """``np.concatenate`` of int64 parts, empty for a tile without rows (no parts)."""
+    return np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
+
+
 def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tuple[int, int]:
     """Join tile segments over shared buffer points; write global ids, table and CSR."""
     grid = TileGrid.from_dict(store.attrs["grid"])
@@ -985,7 +990,7 @@ def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tupl
                 m = d["core"].astype(bool) & (d["segment"] > 0) & edge
                 idx_parts.append(d["index"][m].astype(np.int64))
                 key_parts.append(keys_of(t, d["segment"][m]))
-            idx, key = np.concatenate(idx_parts), np.concatenate(key_parts)
+            idx, key = _joined(idx_parts), _joined(key_parts)
             order = np.argsort(idx)
             cache[t] = idx[order], key[order]
             while len(cache) > 1 and sum(len(v[0]) for v in cache.values()) > STITCH_CACHE_ROWS:
@@ -999,7 +1004,7 @@ def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tupl
             m = ~d["core"].astype(bool) & (d["segment"] > 0)
             b_parts.append(d["index"][m].astype(np.int64))
             k_parts.append(keys_of(t, d["segment"][m]))
-        b_idx, b_key = np.concatenate(b_parts), np.concatenate(k_parts)
+        b_idx, b_key = _joined(b_parts), _joined(k_parts)
         if not len(b_idx):
             continue
         ix, iy = grid.tile_index(t)
@@ -1158,6 +1163,8 @@ def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tupl
 # consecutive (Morton-sorted, so compact) rows drawn over the whole scan.
 EPS_QUANTILE = 0.25
 EPS_FACTOR = 9.0
+#: The eps of a scan with no spacing to measure (a handful of points, exact duplicates), m.
+FALLBACK_EPS = 0.3
 # The version of the stage's code where it changes a result (recorded with a run's
 # workflow, so a rerun after such a change redoes the stage). coarse-v2: the eps rule above;
 # coarse-v3: segments set in a wall join it, stacked groups join (group_set_in, group_stack);
@@ -1176,13 +1183,8 @@ def scan_spacing(store: RunStore, sizes: dict[int, int], *, seed: int = 0) -> fl
     per tile), so a tile is measured in proportion to its points. Tile rows are
     Morton-sorted, so a window is a compact piece of surface and a point's neighbours are
     its true neighbours. Reads only the windows (a few MB), never a whole tile. None when
-    the scan is too small to measure (fewer than 9 points).
-
-    Raises
-    ------
-    ConfigError
-        If the windows hold no measurable point or the spacing is 0 (duplicate points):
-        the message says to set ``coarse.eps`` by hand.
+    the scan has no spacing to measure: fewer than 9 points, no window with 9 points, or
+    nothing but exact duplicates (the caller then falls back to a fixed eps).
     """
     tiles = sorted(t for t, n in sizes.items() if n > 0)
     if sum(sizes[t] for t in tiles) <= 8:
@@ -1219,9 +1221,8 @@ def scan_spacing(store: RunStore, sizes: dict[int, int], *, seed: int = 0) -> fl
 
     try:
         return window_spacing(windows(), k=8, quantile=EPS_QUANTILE)
-    except ConfigError as e:
-        raise ConfigError(f"store {store.url}: no automatic eps ({e}); set coarse.eps and "
-                          "coarse.cluster_epsilon") from None
+    except ConfigError:  # no distinct neighbours anywhere in the windows
+        return None
 
 
 def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
@@ -1242,7 +1243,7 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     if eps is None or cluster_epsilon is None:
         sizes = {t: int(done_ingest[str(t)].get("n_points", 0)) for t in tiles}
         spacing = scan_spacing(store, sizes, seed=params.seed)
-        auto_eps = EPS_FACTOR * spacing if spacing is not None else 0.3
+        auto_eps = EPS_FACTOR * spacing if spacing is not None else FALLBACK_EPS
         eps = auto_eps if eps is None else eps
         if cluster_epsilon is None:
             cluster_epsilon = max(0.15, 2.0 * auto_eps / 3.0)

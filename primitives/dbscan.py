@@ -523,7 +523,8 @@ def window_spacing(windows: Iterable[tuple[npt.ArrayLike, npt.ArrayLike]], *, k:
     ------
     ConfigError
         If a parameter breaks its rule, a window's arrays do not match, no window holds a
-        measured row with ``k`` neighbours, or the spacing is 0 (duplicate points).
+        measured row with ``k`` neighbours, or every measured row has ``k`` exact
+        duplicates (zero spacings are left out of the quantile).
 
     Examples
     --------
@@ -550,11 +551,13 @@ def window_spacing(windows: Iterable[tuple[npt.ArrayLike, npt.ArrayLike]], *, k:
     if not found:
         raise ConfigError(f"The 'windows' parameter of {func} must hold a measured point with {k} neighbours. "
                           "Got none instead.")
-    spacing = float(np.quantile(np.concatenate(found), quantile))
-    if not spacing > 0:
-        raise ConfigError(f"The 'windows' parameter of {func} must have distinct neighbours: the spacing "
-                          f"quantile {quantile} is 0. Set eps explicitly instead.")
-    return spacing
+    # A zero spacing is a point with k exact duplicates: it says nothing about the spacing.
+    pooled = np.concatenate(found)
+    pooled = pooled[pooled > 0]
+    if not len(pooled):
+        raise ConfigError(f"The 'windows' parameter of {func} must have distinct neighbours: every measured "
+                          f"point has {k} exact duplicates. Set eps explicitly instead.")
+    return float(np.quantile(pooled, quantile))
 
 
 def sparse_points(xyz: npt.ArrayLike, mask: npt.ArrayLike, spacing: float, factor: float, *, k: int = 8

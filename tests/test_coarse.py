@@ -13,9 +13,10 @@ import pytest
 from sklearn.metrics import adjusted_rand_score
 
 from pipeline.cli import main
-from pipeline.coarse import CoarseParams, run_coarse
+from pipeline.coarse import FALLBACK_EPS, CoarseParams, run_coarse
 from pipeline.graph import task_runner
 from pipeline.tree_stage import group_starts
+from primitives.dbscan import window_spacing
 from scenes.synth import synth
 from tiling.errors import ConfigError
 from tiling.ingest import IngestParams, ingest
@@ -261,12 +262,24 @@ def _tiny_las(path: Path, pts: np.ndarray) -> Path:
     return path
 
 
-def test_no_automatic_eps_on_duplicate_points(tmp_path):
+def test_duplicate_points_fall_back_to_a_fixed_eps(tmp_path):
+    """Exact duplicates have no spacing to measure: the stage runs with FALLBACK_EPS."""
     scan = _tiny_las(tmp_path / "dup.las", np.zeros((40, 3)) + [500000.0, 3500000.0, 200.0])
     with task_runner("sync", progress=False) as run:
         ingest([str(scan)], str(tmp_path / "s"), IngestParams(tile_size=10.0), runner=run)
-        with pytest.raises(ConfigError, match=r"no automatic eps .*set coarse.eps"):
-            run_coarse(str(tmp_path / "s"), CoarseParams(), runner=run)
+        rep = run_coarse(str(tmp_path / "s"), CoarseParams(), runner=run)
+    assert rep.eps == FALLBACK_EPS
+    assert RunStore.open(str(tmp_path / "s")).attrs["stages"]["coarse"]["spacing"] is None
+
+
+def test_spacing_ignores_exact_duplicates():
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(0, 1, (500, 3))
+    once = window_spacing([(pts, np.ones(500, bool))], k=8, quantile=0.25)
+    many = np.r_[pts, np.repeat(pts[:50], 9, axis=0)]  # 50 points with 9 copies each
+    again = window_spacing([(many, np.ones(len(many), bool))], k=8, quantile=0.25)
+    assert again > 0
+    assert again == pytest.approx(once, rel=0.5)
 
 
 def test_tiny_tile_does_not_crash(tmp_path):
