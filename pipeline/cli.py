@@ -48,12 +48,13 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _synth_description() -> str:
-    from scenes.sites import SITES, TEST_SCENES  # scenes imports take ~0.3 s: only for this help
+    from scenes.sites import GENERATED, SITES, TEST_SCENES  # scenes imports take ~0.3 s: only for this help
 
     return (
         "Scan a synthetic site with a virtual terrestrial laser scanner and write a "
         "LAS 1.4 / LAZ file with per-point ground truth, plus a Parquet table of the "
-        f"elements. Sites: {', '.join(SITES)}. Test scenes: {', '.join(TEST_SCENES)}."
+        f"elements. Sites: {', '.join(SITES)}. Test scenes: {', '.join(TEST_SCENES)}. Procedural sites "
+        f"(a new site for every --seed): {', '.join(GENERATED)}."
     )
 
 

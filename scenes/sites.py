@@ -54,7 +54,7 @@ from scenes.scene import Scene, SceneBuilder
 from scenes.shapes import ArcPath, StraightPath
 from tiling.classes import ClassId
 
-__all__ = ["SITES", "TEST_SCENES", "SiteSpec", "UnknownSceneError", "build_scene", "scene_names"]
+__all__ = ["GENERATED", "SITES", "TEST_SCENES", "SiteSpec", "UnknownSceneError", "build_scene", "scene_names"]
 
 class UnknownSceneError(KeyError, ValueError):
     """Raised by :func:`build_scene` for a name that is neither a site nor a test scene."""
@@ -75,9 +75,12 @@ class SiteSpec:
     build : callable
         ``build(rng) -> Scene``.
     expected_counts : dict of ClassId to int
-        Element instances per element class (arch, dome, minaret, pillar), as built.
-    default_stations : int
-        How many of the scene's stations (in priority order) a scan uses by default.
+        Element instances per element class (arch, dome, minaret, pillar), as built;
+        empty for a generated site, whose counts depend on the seed (read them off the
+        scene).
+    default_stations : int or None
+        How many of the scene's stations (in priority order) a scan uses by default;
+        None = all.
     size : tuple of 3 floats
         Approximate x, y, z extent of the building (ground and clutter excluded), metres.
     """
@@ -86,7 +89,7 @@ class SiteSpec:
     description: str
     build: Callable[[RngLike], Scene] = field(repr=False)
     expected_counts: dict[ClassId, int]
-    default_stations: int
+    default_stations: int | None
     size: tuple[float, float, float]
 
 
@@ -303,15 +306,43 @@ TEST_SCENES: dict[str, SiteSpec] = {
 }
 
 
+def _generated(family: str | None) -> SiteSpec:
+    from scenes.procedural import procedural_site
+
+    def build(rng: RngLike) -> Scene:
+        seed = rng if isinstance(rng, (int, np.integer)) else (
+            0 if rng is None else int(np.random.default_rng(rng).integers(2**31)))
+        return procedural_site(int(seed), family)
+
+    what = f"a {family.replace('_', ' ')}" if family else "a site of the family its seed picks"
+    return SiteSpec(name=f"gen-{family}" if family else "gen",
+                    description=f"procedural: {what}, a new one for every seed (scenes/procedural.py)",
+                    build=build, expected_counts={}, default_stations=None, size=(0.0, 0.0, 0.0))
+
+
+def _generated_specs() -> dict[str, SiteSpec]:
+    from scenes.procedural import FAMILIES
+
+    specs = [_generated(None), *(_generated(f) for f in FAMILIES)]
+    return {s.name: s for s in specs}
+
+
+#: Procedural sites (:mod:`scenes.procedural`): ``gen`` (the family is drawn from the
+#: seed) and ``gen-<family>``; the seed picks the site. Seeds are split into training,
+#: validation and test ranges (``scenes.procedural.SPLITS``).
+GENERATED: dict[str, SiteSpec] = _generated_specs()
+
+
 def scene_names() -> list[str]:
-    """All registered names: the five sites first, then the test scenes.
+    """All registered names: the five sites first, then the test scenes, then the
+    procedural sites.
 
     Examples
     --------
     >>> scene_names()[:5]
     ['wazir_khan', 'khudabad', 'derawar', 'roman', 'temple']
     """
-    return [*SITES, *TEST_SCENES]
+    return [*SITES, *TEST_SCENES, *GENERATED]
 
 
 def build_scene(name: str, *, rng: RngLike = None) -> Scene:
@@ -320,7 +351,8 @@ def build_scene(name: str, *, rng: RngLike = None) -> Scene:
     Parameters
     ----------
     name : str
-        A site (:data:`SITES`) or a test scene (:data:`TEST_SCENES`).
+        A site (:data:`SITES`), a test scene (:data:`TEST_SCENES`) or a procedural site
+        (:data:`GENERATED`).
     rng : int, Generator or None
         Seeds the jitter of proportions and clutter placement; None gives the nominal
         geometry. Element counts never depend on it.
@@ -337,11 +369,11 @@ def build_scene(name: str, *, rng: RngLike = None) -> Scene:
     >>> s.stations.tolist(), s.element_counts()[ClassId.ARCH]
     ([[0.0, 0.0, 1.6]], 0)
     """
-    spec = SITES.get(name) or TEST_SCENES.get(name)
+    spec = SITES.get(name) or TEST_SCENES.get(name) or GENERATED.get(name)
     if spec is None:
         raise UnknownSceneError(
             f"unknown site {name!r}; known sites: {', '.join(SITES)}; "
-            f"test scenes: {', '.join(TEST_SCENES)}"
+            f"test scenes: {', '.join(TEST_SCENES)}; procedural: {', '.join(GENERATED)}"
         )
     return spec.build(rng)
 

@@ -38,7 +38,7 @@ from scenes.scanner import (
     station_poses,
 )
 from scenes.scene import Scene
-from scenes.sites import SITES, TEST_SCENES, SiteSpec, build_scene
+from scenes.sites import GENERATED, SITES, TEST_SCENES, SiteSpec, build_scene
 from tiling.classes import ELEMENT_CLASSES, NUM_CLASSES, ClassId
 from tiling.errors import ConfigError, InputFileError, OutputExistsError
 
@@ -309,9 +309,11 @@ def _spec(name: str) -> SiteSpec:
         return SITES[name]
     if name in TEST_SCENES:
         return TEST_SCENES[name]
+    if name in GENERATED:
+        return GENERATED[name]
     raise ConfigError(
         f"unknown site {name!r}; known sites: {', '.join(SITES)}; "
-        f"test scenes: {', '.join(TEST_SCENES)}"
+        f"test scenes: {', '.join(TEST_SCENES)}; procedural: {', '.join(GENERATED)}"
     )
 
 
@@ -373,7 +375,8 @@ def synth(
     )
     if on_total is not None:
         on_total(count_rays(scene, params))
-    expected = {int(c): int(spec.expected_counts.get(c, 0)) for c in ELEMENT_CLASSES}
+    built = spec.expected_counts or scene.element_counts()  # a generated site: as built
+    expected = {int(c): int(built.get(c, 0)) for c in ELEMENT_CLASSES}
     return write_scan(
         scene,
         out,
