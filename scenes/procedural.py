@@ -93,10 +93,13 @@ def family_of(seed: int) -> str:
 class _Site:
     """A SceneBuilder with the random source and the ruin rule of one site."""
 
-    def __init__(self, name: str, rng: np.random.Generator, *, ruin: float = 0.0) -> None:
+    def __init__(self, name: str, rng: np.random.Generator, *, ruin: float = 0.0,
+                 ruin_rng: np.random.Generator | None = None) -> None:
         self.b = SceneBuilder(name)
         self.rng = rng
         self.ruin = ruin
+        # the ruin's own draws: the same seed makes the same layout, ruined or not
+        self.ruin_rng = ruin_rng if ruin_rng is not None else np.random.default_rng(0)
         self.extent = np.array([[np.inf, np.inf], [-np.inf, -np.inf]])
         self.solid: list[tuple[float, float, float, float]] = []  # footprints no station stands in
 
@@ -114,11 +117,11 @@ class _Site:
         """Add one instance; in a ruin it may be missing or broken off at a random height."""
         m = mesh if isinstance(mesh, TriMesh) else concat_meshes(mesh)
         if self.ruin and cls != ClassId.GROUND:
-            if self.rng.random() < 0.5 * self.ruin:
+            if self.ruin_rng.random() < 0.5 * self.ruin:
                 return
-            if self.rng.random() < self.ruin:
+            if self.ruin_rng.random() < self.ruin:
                 lo, hi = m.bounds()[:, 2]
-                cut = lo + (hi - lo) * self.u(0.35, 0.9)
+                cut = lo + (hi - lo) * float(self.ruin_rng.uniform(0.35, 0.9))
                 keep = m.vertices[m.faces][:, :, 2].max(axis=1) <= cut
                 if keep.sum() < 4:
                     return
@@ -452,16 +455,24 @@ _LAYOUTS: dict[str, Callable[[_Site], None]] = {
 }
 
 
-def procedural_site(seed: int, family: str | None = None) -> Scene:
+def procedural_site(seed: int, family: str | None = None, *, ruin: float | None = None) -> Scene:
     """The site of ``seed``: family ``family`` (default :func:`family_of`), with ground,
-    clutter and 3-10 random stations (a partial scan in about one site in four)."""
+    clutter and 3-10 random stations (a partial scan in about one site in four).
+
+    ``ruin`` (``ruins`` only) overrides the drawn share of elements that are missing or
+    broken off (0.2-0.5); 0 builds the same layout intact.
+    """
     family = family or family_of(seed)
     if family not in FAMILIES:
         raise ConfigError(f"family {family!r} is not one of {', '.join(FAMILIES)}")
+    if ruin is not None and not 0.0 <= ruin <= 1.0:
+        raise ConfigError(f"ruin must be between 0 and 1; got {ruin}")
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), FAMILIES.index(family)]))
-    s = _Site(f"gen-{family}-{seed}", rng)
+    ruin_rng = np.random.default_rng(np.random.SeedSequence([int(seed), FAMILIES.index(family), 1]))
+    s = _Site(f"gen-{family}-{seed}", rng, ruin_rng=ruin_rng)
     if family == "ruins":
-        s.ruin = float(rng.uniform(0.2, 0.5))
+        drawn = float(ruin_rng.uniform(0.2, 0.5))
+        s.ruin = drawn if ruin is None else float(ruin)
         layout = _LAYOUTS[str(s.pick(tuple(_LAYOUTS)))]
     else:
         layout = _LAYOUTS[family]

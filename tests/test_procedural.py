@@ -1,0 +1,105 @@
+"""The procedural site generator (scenes/procedural.py): every family builds, a seed is a
+site, compound elements are split into their parts, the splits never overlap."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import laspy
+import numpy as np
+import pytest
+
+from scenes.procedural import FAMILIES, SPLITS, family_of, procedural_site, scan_draw, split_seeds
+from scenes.sites import GENERATED, build_scene
+from tiling.classes import ClassId
+from tiling.errors import ConfigError
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_every_family_builds_for_seeds_of_every_split(family):
+    for split in SPLITS:
+        for seed in split_seeds(split, 4, family=family):
+            s = procedural_site(seed, family)
+            assert s.name == f"gen-{family}-{seed}"
+            assert len(s.stations) >= 3
+            assert sum(e.class_id == ClassId.GROUND for e in s.elements) == 1
+
+
+def test_a_seed_is_one_site_and_seeds_differ():
+    a, b = procedural_site(200_010), procedural_site(200_010)
+    np.testing.assert_array_equal(a.vertices, b.vertices)
+    np.testing.assert_array_equal(a.face_instance, b.face_instance)
+    c = procedural_site(200_017)  # the same family (seeds 7 apart), another site
+    assert family_of(200_010) == family_of(200_017)
+    assert a.vertices.shape != c.vertices.shape or not np.array_equal(a.vertices, c.vertices)
+
+
+def test_the_family_cycles_with_the_seed_and_can_be_named():
+    assert [family_of(s) for s in range(7)] == list(FAMILIES)
+    assert procedural_site(3, "fort").name == "gen-fort-3"
+    with pytest.raises(ConfigError, match="family 'castle'"):
+        procedural_site(3, "castle")
+
+
+def test_splits_are_disjoint_and_hold_every_family():
+    ranges = sorted(SPLITS.values())
+    assert all(a[1] <= b[0] for a, b in zip(ranges, ranges[1:], strict=False))
+    for split in SPLITS:
+        assert {family_of(s) for s in split_seeds(split, 7)} == set(FAMILIES)
+    with pytest.raises(ConfigError, match="split 'dev'"):
+        split_seeds("dev", 3)
+
+
+def test_a_pavilion_is_its_dome_columns_and_slab():
+    """Compound elements are labelled by part, as the tree is meant to split them."""
+    names: dict[ClassId, list[str]] = {}
+    for seed in split_seeds("train", 6, family="pavilion_garden"):
+        for e in procedural_site(seed).elements:
+            names.setdefault(e.class_id, []).append(e.name)
+    assert any(n.endswith(" dome") and n.startswith("pavilion") for n in names[ClassId.DOME])
+    assert any(" column " in n for n in names[ClassId.PILLAR])
+    assert any(n.endswith(" slab") for n in names[ClassId.ROOF])
+
+
+def test_a_gateway_is_its_arch_and_piers():
+    names = [(e.class_id, e.name) for seed in split_seeds("train", 8, family="fort")
+             for e in procedural_site(seed).elements if e.name.startswith("gateway")]
+    assert (ClassId.ARCH, "gateway arch") in names
+    assert (ClassId.PILLAR, "gateway pier 1") in names
+
+
+def test_ruins_miss_parts_of_their_layout():
+    """A ruin is its layout with elements missing or broken off: fewer triangles and no
+    more elements than the same layout built intact."""
+    for seed in split_seeds("train", 8, family="ruins"):
+        ruin, intact = procedural_site(seed), procedural_site(seed, ruin=0.0)
+        assert len(ruin.faces) < len(intact.faces)
+        assert len(ruin.elements) <= len(intact.elements)
+    with pytest.raises(ConfigError, match="ruin must be between 0 and 1"):
+        procedural_site(3, "ruins", ruin=1.5)
+
+
+def test_scan_draw_is_seeded_and_in_range():
+    assert scan_draw(5) == scan_draw(5)
+    assert scan_draw(5) != scan_draw(6)
+
+
+def test_generated_names_build_through_the_registry():
+    assert set(GENERATED) == {"gen", *(f"gen-{f}" for f in FAMILIES)}
+    assert build_scene("gen", rng=200_003).name == procedural_site(200_003).name
+    assert build_scene("gen-monument", rng=4).name == "gen-monument-4"
+
+
+def test_synth_writes_a_procedural_site_with_its_own_counts(tmp_path):
+    out = tmp_path / "g.laz"
+    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "synth", "gen-pavilion_garden", "--seed", "200003",
+                           "--points", "40000", "--out", str(out), "--no-progress"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    las = laspy.read(out)
+    assert 30_000 < len(las.points) < 50_000
+    scene = procedural_site(200_003, "pavilion_garden")
+    seen = set(np.unique(np.asarray(las.gt_instance)).tolist()) - {0}
+    assert seen <= {e.instance for e in scene.elements}
+    expected = scene.element_counts()[ClassId.PILLAR]
+    assert f"{expected:>10}" in next(line for line in proc.stdout.splitlines() if line.startswith("pillar"))
