@@ -51,6 +51,7 @@ __all__ = [
     "DatasetParams",
     "build_dataset",
     "generate_samples",
+    "labelled_samples",
     "load_dataset",
     "pack_grids",
     "unpack_grids",
@@ -287,6 +288,101 @@ def generate_samples(
     if keep_points:
         out["points"] = [s[4] for _, s in samples]
     return out
+
+
+def labelled_samples(
+    xyz: npt.ArrayLike,
+    gt_class: npt.ArrayLike,
+    gt_instance: npt.ArrayLike,
+    *,
+    seed: int = 0,
+    variants: int = 3,
+    holdout: float = 0.2,
+    grid_size: int = GRID_SIZE,
+    canonical_yaw: bool = True,
+    source: str = "labelled",
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Training and test samples cut from a user's labelled scan (``hollowtree train --from``).
+
+    Every instance (``gt_instance`` > 0; the points of one class with instance 0 count as
+    one instance of that class) takes the majority of its points' ``gt_class`` and gives
+    ``variants`` samples (ground and roof twice as many), cut and augmented as the
+    synthetic ones are. Whole instances are held out for the test set, a share
+    ``holdout`` of them (seeded; at least one where there are two or more), so no test
+    sample shares points with a training one.
+
+    Returns
+    -------
+    train, test : dict
+        The keys of :func:`generate_samples` (``scene`` is the instance id, ``recipe`` is
+        ``source``).
+
+    Raises
+    ------
+    ConfigError
+        If the arrays do not match, ``holdout`` is not in [0, 1), or no instance of an
+        output class has enough points (``_MIN_POINTS``).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> pts = np.r_[rng.uniform(0, 20, (4000, 3)) * [1, 1, 0], rng.normal([5, 5, 3], 0.5, (1000, 3))]
+    >>> cls = np.r_[np.full(4000, 1), np.full(1000, 5)]
+    >>> tr, te = labelled_samples(pts, cls, np.r_[np.zeros(4000), np.ones(1000)], holdout=0.0)
+    >>> sorted(set(tr["labels"].tolist())), len(te["labels"])
+    ([1, 5], 0)
+    """
+    p = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    c = np.asarray(gt_class).astype(np.int64).reshape(-1)
+    inst = np.asarray(gt_instance).astype(np.int64).reshape(-1)
+    if not (len(p) == len(c) == len(inst)):
+        raise ConfigError(f"labelled_samples: {len(p)} points, {len(c)} classes and {len(inst)} instances differ")
+    if not 0.0 <= holdout < 1.0:
+        raise ConfigError(f"The 'holdout' parameter must be in [0, 1). Got {holdout!r} instead.")
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 77]))
+    # instance 0 of class k becomes the key -1 - k: one pseudo-instance per class
+    key = np.where(inst > 0, inst, -1 - c)
+    order = np.argsort(key, kind="stable")
+    key_s = key[order]
+    starts = np.flatnonzero(np.r_[True, key_s[1:] != key_s[:-1]])
+    ends = np.r_[starts[1:], len(key_s)]
+    usable = []  # (first sorted row, end, class) of instances of an output class, big enough
+    for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
+        cls_id = int(np.bincount(c[order[a:b]]).argmax())
+        if cls_id in [int(k) for k in OUTPUT_CLASSES] and b - a >= _MIN_POINTS:
+            usable.append((a, b, ClassId(cls_id)))
+    n_test = 0 if holdout == 0 or len(usable) < 2 else max(1, round(holdout * len(usable)))
+    held = set(rng.choice(len(usable), n_test, replace=False).tolist()) if n_test else set()
+    out: dict[str, list[tuple[ClassId, npt.NDArray[np.float64], int]]] = {"train": [], "test": []}
+    for j, (a, b, cls) in enumerate(usable):
+        part = "test" if j in held else "train"
+        pts = p[order[a:b]]
+        for _ in range(variants * (2 if cls in (ClassId.GROUND, ClassId.ROOF) else 1)):
+            q = pts[_cut(pts, cls, rng)]
+            if len(q) < _MIN_POINTS or (cls == ClassId.ROOF and not _shows_faces(q)):
+                continue
+            if len(q) > _MAX_POINTS:
+                q = q[rng.choice(len(q), _MAX_POINTS, replace=False)]
+            out[part].append((cls, _augment(q, rng), int(key_s[a])))
+    if not out["train"] and not out["test"]:
+        raise ConfigError(f"{source}: no labelled instance of a HollowNet class with at least {_MIN_POINTS} points")
+    result = []
+    for part in ("train", "test"):
+        cut = out[part]
+        if cut:
+            offsets = np.r_[0, np.cumsum([len(q) for _, q, _ in cut])]
+            grids, _ = voxelize_batch(np.concatenate([q for _, q, _ in cut]), offsets, size=grid_size,
+                                      canonical_yaw=canonical_yaw)
+            grids = grids == OCCUPIED
+        else:
+            grids = np.zeros((0, grid_size, grid_size, grid_size), dtype=bool)
+        result.append({
+            "grids": grids, "labels": np.array([int(k) for k, _, _ in cut], dtype=np.uint8),
+            "n_points": np.array([len(q) for _, q, _ in cut], dtype=np.int32),
+            "scene": np.array([i for _, _, i in cut], dtype=np.int32),
+            "recipe": np.array([source] * len(cut), dtype="U16"),
+        })
+    return result[0], result[1]
 
 
 # --------------------------------------------------------------------------- storage

@@ -27,6 +27,7 @@ import logging
 import math
 import os
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -225,8 +226,14 @@ def _ckpt_path(out: Path) -> Path:
 
 
 def train(config: TrainConfig, *, out: str | Path, device: str = "auto", resume: bool = False,
-          overwrite: bool = False, progress: bool = True) -> TrainReport:
+          overwrite: bool = False, progress: bool = True,
+          labelled: Sequence[tuple[str, dict[str, Any], dict[str, Any]]] = (),
+          synthetic: bool = True) -> TrainReport:
     """Train ``config.arch`` on the data sets of ``config`` and write the weights to ``out``.
+
+    ``labelled`` adds samples cut from a user's labelled scans: ``(name, train, test)``
+    per scan, as :func:`hollownet.dataset.labelled_samples` returns them. With
+    ``synthetic=False`` they are the only data (the synthetic data sets are not made).
 
     Raises
     ------
@@ -247,8 +254,10 @@ def train(config: TrainConfig, *, out: str | Path, device: str = "auto", resume:
     torch.manual_seed(config.seed)
     data_dir = Path(config.data_dir) if config.data_dir else default_data_dir()
     train_p, test_p = config.datasets()
+    if not synthetic and not labelled:
+        raise ConfigError("nothing to train on: no labelled scan and the synthetic data sets are off")
     sets = []
-    for p in (train_p, test_p):
+    for p in (train_p, test_p) if synthetic else ():
         bar = tqdm(total=p.n_per_class * len(OUTPUT_CLASSES), desc=f"data set {p.split}", unit="sample",
                    disable=not progress, leave=False)
 
@@ -258,7 +267,16 @@ def train(config: TrainConfig, *, out: str | Path, device: str = "auto", resume:
         folder = build_dataset(data_dir, p, progress=step)
         bar.close()
         sets.append(load_dataset(folder))
+    for _name, ltr, lte in labelled:
+        sets = [ltr, lte] if not sets else [
+            {k: np.concatenate([a[k], b[k]]) for k in ("grids", "labels", "n_points", "scene", "recipe")}
+            for a, b in zip(sets, (ltr, lte), strict=True)]
     tr, te = sets
+    if not len(tr["labels"]) or not len(te["labels"]):
+        raise ConfigError(f"too few labelled instances: {len(tr['labels'])} training and {len(te['labels'])} test "
+                          "samples; add labelled scans or keep the synthetic data sets")
+    data_key = hashlib.sha256(json.dumps([synthetic, [n for n, _, _ in labelled],
+                                          [int(len(a["labels"])) for _, a, _ in labelled]]).encode()).hexdigest()[:16]
     index = np.zeros(256, dtype=np.int64)
     for i, c in enumerate(OUTPUT_CLASSES):
         index[int(c)] = i
@@ -276,7 +294,7 @@ def train(config: TrainConfig, *, out: str | Path, device: str = "auto", resume:
             raise ConfigError(f"nothing to resume: no checkpoint {ckpt}")
         ck = load_checkpoint(ckpt)
         meta = ck["meta"]
-        if meta.get("fingerprint") != config.fingerprint():
+        if meta.get("fingerprint") != config.fingerprint() or meta.get("data_key", data_key) != data_key:
             raise ConfigError(f"{ckpt} was made with other training settings ({meta.get('config')}); "
                               "rerun without --resume or with the same config")
         model.load_state_dict(ck["state_dict"])
@@ -327,7 +345,7 @@ def train(config: TrainConfig, *, out: str | Path, device: str = "auto", resume:
             tqdm.write(msg)
         save_checkpoint(ckpt, model, arch=config.arch, optimizer=opt, meta={
             "epoch": epoch + 1, "history": history, "config": config.to_dict(),
-            "fingerprint": config.fingerprint()})
+            "fingerprint": config.fingerprint(), "data_key": data_key})
     cm = evaluate(model, te["grids"], te["labels"], device=dev, amp=config.amp)
     acc = float(np.trace(cm) / max(cm.sum(), 1))
     names = [CLASS_NAMES[c] for c in OUTPUT_CLASSES]
@@ -335,7 +353,9 @@ def train(config: TrainConfig, *, out: str | Path, device: str = "auto", resume:
         "config": config.to_dict(), "fingerprint": config.fingerprint(), "seed": config.seed,
         "epochs": config.epochs, "history": history, "test_accuracy": acc, "confusion": cm.tolist(),
         "grid_size": train_p.grid_size, "canonical_yaw": train_p.canonical_yaw,
-        "datasets": {"train": train_p.key(), "test": test_p.key()},
+        "datasets": {"train": train_p.key(), "test": test_p.key()} if synthetic else {},
+        "labelled": [{"source": n, "train_samples": int(len(a["labels"])), "test_samples": int(len(b["labels"]))}
+                     for n, a, b in labelled],
         "n_train": int(len(y_train)), "n_test": int(len(te["labels"])), "torch": str(torch.__version__),
     }
     model = model.to("cpu").to(memory_format=torch.contiguous_format)

@@ -48,7 +48,11 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _synth_description() -> str:
-    from scenes.sites import GENERATED, SITES, TEST_SCENES  # scenes imports take ~0.3 s: only for this help
+    from scenes.sites import (  # scenes imports take ~0.3 s: only for this help
+        GENERATED,
+        SITES,
+        TEST_SCENES,
+    )
 
     return (
         "Scan a synthetic site with a virtual terrestrial laser scanner and write a "

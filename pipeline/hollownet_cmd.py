@@ -48,6 +48,20 @@ def add_parsers(sub: Any) -> None:
     t.add_argument("--data-dir", help="data set cache (default $HOLLOWTREE_CACHE or ~/.cache/hollowtree)")
     t.add_argument("--overwrite", action="store_true", help="replace an existing weights file")
     t.add_argument("--no-progress", action="store_true", help="no progress bars")
+    t.add_argument("--from", dest="labelled", action="append", type=Path, default=[], metavar="FILE",
+                   help="a labelled LAS/LAZ scan to cut training samples from (repeatable): every instance "
+                        "of --instance-dim, its class from --class-dim; a fifth of the instances are held out "
+                        "for the test set")
+    t.add_argument("--class-dim", default="gt_class",
+                   help="the per-point class of --from files: an extra dimension holding hollowtree class "
+                        "ids, or 'classification' with --class-map (default gt_class)")
+    t.add_argument("--instance-dim", default="gt_instance",
+                   help="the per-point instance id of --from files (default gt_instance; 0 = none)")
+    t.add_argument("--class-map", default=None, metavar="CODE=CLASS,...",
+                   help="translate --class-dim values to classes, e.g. '2=ground,6=wall,64=arch,65=dome'; "
+                        "values not named are left out")
+    t.add_argument("--no-synthetic", action="store_true",
+                   help="train on the --from scans alone (no synthetic data sets)")
     t.set_defaults(func=cmd_train)
 
     c = sub.add_parser(
@@ -82,6 +96,7 @@ def _read_config(path: Path) -> dict[str, Any]:
 
 def cmd_train(args: argparse.Namespace) -> int:
     """``hollowtree train``."""
+    from hollownet.dataset import labelled_samples
     from hollownet.train import TrainConfig, train
 
     data = _read_config(args.config) if args.config else {}
@@ -93,10 +108,70 @@ def cmd_train(args: argparse.Namespace) -> int:
         config = TrainConfig.from_dict(data)
     except TypeError as exc:
         raise ConfigError(f"invalid training config: {exc}") from None
+    if args.no_synthetic and not args.labelled:
+        raise ConfigError("--no-synthetic needs at least one --from FILE")
+    class_map = _class_map(args.class_map)
+    labelled = []
+    for path in args.labelled:
+        xyz, cls, inst = read_labelled(path, args.class_dim, args.instance_dim, class_map)
+        tr, te = labelled_samples(xyz, cls, inst, seed=config.seed, variants=config.variants, source=path.name)
+        print(f"{path}: {len(tr['labels'])} training and {len(te['labels'])} test samples "
+              f"from {len(np.unique(inst[inst > 0]))} instances")
+        labelled.append((str(path), tr, te))
     report = train(config, out=args.out, device=args.device, resume=args.resume,
-                   overwrite=args.overwrite, progress=not args.no_progress)
+                   overwrite=args.overwrite, progress=not args.no_progress, labelled=labelled,
+                   synthetic=not args.no_synthetic)
     print(report.summary())
     return 0
+
+
+def _class_map(text: str | None) -> dict[int, int] | None:
+    """``"2=ground,64=arch"`` -> ``{2: 1, 64: 4}``; None stays None."""
+    from tiling.classes import class_id
+
+    if text is None:
+        return None
+    out: dict[int, int] = {}
+    for item in filter(None, (t.strip() for t in text.split(","))):
+        code, sep, name = item.partition("=")
+        try:
+            out[int(code)] = int(class_id(name.strip()))
+        except (ValueError, KeyError):
+            sep = ""
+        if not sep:
+            raise ConfigError(f"--class-map: {item!r} is not CODE=CLASS (a whole number and a class name)")
+    return out
+
+
+def read_labelled(path: Path, class_dim: str, instance_dim: str,
+                  class_map: dict[int, int] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points (metres, minus the file's lowest corner), classes and instances of a labelled scan.
+
+    Raises
+    ------
+    ConfigError
+        If the file lacks either dimension (the message lists the ones it has) or a
+        class is not a hollowtree class id (without ``class_map``).
+    """
+    from tiling.classes import NUM_CLASSES
+    from tiling.readers import PointBlock, read_blocks
+
+    blocks = PointBlock.concat(read_blocks(path))
+    for dim in (class_dim, instance_dim):
+        if dim not in blocks.extra:
+            raise ConfigError(f"{path}: no dimension {dim!r} (it has {', '.join(sorted(blocks.extra)) or 'none'})")
+    cls = np.asarray(blocks.extra[class_dim]).astype(np.int64)
+    if class_map is not None:
+        lut = np.zeros(int(max(cls.max(initial=0), max(class_map, default=0))) + 1, dtype=np.int64)
+        for code, c in class_map.items():
+            if code >= 0:
+                lut[code] = c
+        cls = np.where(cls >= 0, lut[np.clip(cls, 0, None)], 0)
+    elif len(cls) and (cls.min() < 0 or cls.max() >= NUM_CLASSES):
+        raise ConfigError(f"{path}: {class_dim} holds {int(cls.max())}, not a hollowtree class id (0-{NUM_CLASSES - 1}); "
+                          "pass --class-map CODE=CLASS,...")
+    xyz = blocks.xyz - blocks.xyz.min(axis=0) if len(blocks.xyz) else blocks.xyz
+    return xyz, cls, np.asarray(blocks.extra[instance_dim]).astype(np.int64)
 
 
 def _segment_file(path: Path) -> np.ndarray:

@@ -1,0 +1,110 @@
+"""``hollowtree train --from``: HollowNet trained on a user's labelled scan, and a workflow
+that names the weights it writes (issue 43, item 7)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import laspy
+import numpy as np
+import pytest
+
+from hollownet.dataset import labelled_samples
+from tiling.errors import ConfigError
+
+pytestmark = pytest.mark.slow
+
+
+def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "pipeline.cli", *args], capture_output=True, text=True, cwd=cwd)
+
+
+@pytest.fixture(scope="module")
+def labelled(tmp_path_factory):
+    d = tmp_path_factory.mktemp("labelled")
+    proc = _cli("synth", "gen-pavilion_garden", "--seed", "3", "--points", "120000", "--out", str(d / "lab.laz"),
+                "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    (d / "cfg.yaml").write_text("epochs: 1\nn_train: 8\nn_test: 4\n")
+    return d
+
+
+def test_instances_are_held_out_whole():
+    rng = np.random.default_rng(1)
+    pts = np.concatenate([rng.normal([3 * i, 0, 2], 0.4, (400, 3)) for i in range(30)])
+    cls = np.repeat(np.where(np.arange(30) % 2 == 0, 5, 7), 400)
+    inst = np.repeat(np.arange(1, 31), 400)
+    tr, te = labelled_samples(pts, cls, inst, holdout=0.3, variants=2)
+    assert set(tr["scene"].tolist()).isdisjoint(te["scene"].tolist())
+    assert len(te["labels"]) > 0
+    assert set(tr["labels"].tolist()) | set(te["labels"].tolist()) == {5, 7}
+    # an instance takes the majority class of its points
+    cls2 = cls.copy()
+    cls2[:100] = 2
+    tr2, _ = labelled_samples(pts, cls2, inst, holdout=0.0, variants=1)
+    assert tr2["labels"][tr2["scene"] == 1].tolist() == [5]
+
+
+def test_no_usable_instance_is_a_clear_error():
+    with pytest.raises(ConfigError, match="no labelled instance"):
+        labelled_samples(np.zeros((50, 3)), np.full(50, 5), np.ones(50))
+
+
+def test_train_from_a_labelled_scan_and_run_with_its_weights(labelled, tmp_path):
+    d = labelled
+    proc = _cli("train", "--from", str(d / "lab.laz"), "--no-synthetic", "--config", str(d / "cfg.yaml"),
+                "--out", str(tmp_path / "mine.pt"), "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    assert "training and" in proc.stdout
+    info = json.loads((tmp_path / "mine.json").read_text())
+    assert info["labelled"][0]["source"].endswith("lab.laz")
+    assert info["labelled"][0]["train_samples"] > 0
+    assert info["datasets"] == {}
+    wf = tmp_path / "wf.yaml"
+    wf.write_text(f"input: {{files: [{d / 'lab.laz'}]}}\nstore: {tmp_path / 's.zarr'}\n"
+                  f"coarse: {{min_support: 300}}\ntree: {{weights: {tmp_path / 'mine.pt'}}}\n"
+                  "cluster: {scheduler: sync}\n")
+    run = _cli("run", str(wf), "--no-progress")
+    assert run.returncode == 0, run.stderr
+    assert "labels:" in run.stdout
+
+
+def test_classification_with_a_class_map_and_a_named_instance_dim(labelled, tmp_path):
+    src = laspy.read(labelled / "lab.laz")
+    codes = {1: 2, 2: 6, 3: 6, 5: 65, 7: 67, 8: 1}  # hollowtree class -> LAS code
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.add_extra_dims([laspy.ExtraBytesParams("object_id", np.uint32)])
+    header.scales, header.offsets = src.header.scales, src.header.offsets
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = src.x, src.y, src.z
+    gt = np.asarray(src.gt_class)
+    las.classification = np.array([codes.get(int(c), 1) for c in range(9)], dtype=np.uint8)[gt]
+    las.object_id = np.asarray(src.gt_instance)
+    las.write(tmp_path / "mine.las")
+    proc = _cli("train", "--from", str(tmp_path / "mine.las"), "--class-dim", "classification",
+                "--instance-dim", "object_id", "--class-map", "2=ground,6=wall,65=dome,67=pillar",
+                "--no-synthetic", "--config", str(labelled / "cfg.yaml"), "--out", str(tmp_path / "w.pt"),
+                "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--instance-dim", "tree_id"], "no dimension 'tree_id'"),
+    (["--class-map", "2=ground,6=castle"], "--class-map: '6=castle' is not CODE=CLASS"),
+    (["--class-dim", "gt_instance"], "not a hollowtree class id"),
+])
+def test_bad_labelled_input_is_one_line_exit_2(labelled, tmp_path, args, message):
+    proc = _cli("train", "--from", str(labelled / "lab.laz"), *args, "--no-synthetic", "--out",
+                str(tmp_path / "w.pt"), "--no-progress")
+    assert proc.returncode == 2
+    assert len(proc.stderr.strip().splitlines()) == 1
+    assert message in proc.stderr
+
+
+def test_no_synthetic_needs_a_labelled_scan(tmp_path):
+    proc = _cli("train", "--no-synthetic", "--out", str(tmp_path / "w.pt"))
+    assert proc.returncode == 2
+    assert "--no-synthetic needs at least one --from FILE" in proc.stderr
