@@ -194,6 +194,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--no-progress", action="store_true", help="no progress bars")
     c.set_defaults(func=_cmd_coarse)
 
+    from pipeline.hollownet_cmd import add_labelled_args
     from pipeline.hollownet_cmd import add_parsers as add_hollownet_parsers
 
     add_hollownet_parsers(sub)  # train, classify
@@ -258,6 +259,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="output JSON (default split-v1.json; the shipped one is tree/data/split-v1.json)")
     fs.add_argument("--overwrite", action="store_true", help="replace an existing output")
     fs.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_labelled_args(fs, "element groups")
     fs.set_defaults(func=_cmd_fit_split)
 
     r = sub.add_parser(
@@ -354,6 +356,7 @@ def _cmd_fit_energy(args: argparse.Namespace) -> int:
 def _cmd_fit_split(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from pipeline.hollownet_cmd import class_map_of
     from pipeline.split_fit import TRAINING_SCENES, fit_split_from_scenes
     from tiling.errors import ConfigError
 
@@ -363,12 +366,22 @@ def _cmd_fit_split(args: argparse.Namespace) -> int:
         raise ConfigError(f"{args.out}: folder {args.out.parent} does not exist")
     if not 0.0 < args.threshold < 1.0:
         raise ConfigError(f"--threshold must be between 0 and 1 (a probability); got {args.threshold}")
-    with tqdm(total=len(TRAINING_SCENES), unit="scene", desc="fit-split", disable=args.no_progress) as bar:
-        model = fit_split_from_scenes(args.work, seed=args.seed, threshold=args.threshold,
-                                      on_scene=lambda i: bar.update(1))
+    if args.no_synthetic and not args.labelled:
+        raise ConfigError("--no-synthetic needs at least one --from FILE")
+    for f in args.labelled:
+        if not f.is_file():
+            raise ConfigError(f"--from {f}: file does not exist")
+    scenes = () if args.no_synthetic else TRAINING_SCENES
+    with tqdm(total=len(scenes) + len(args.labelled), unit="scene", desc="fit-split",
+              disable=args.no_progress) as bar:
+        model = fit_split_from_scenes(args.work, scenes=scenes, seed=args.seed, threshold=args.threshold,
+                                      on_scene=lambda i: bar.update(1), files=tuple(args.labelled),
+                                      class_dim=args.class_dim, instance_dim=args.instance_dim,
+                                      class_map=class_map_of(args.class_map))
     model.save(args.out)
     info = model.info
-    print(f"{args.out}: {info['samples']} proposals ({info['right']} right) from {info['scenes']} scenes; "
+    print(f"{args.out}: {info['samples']} proposals ({info['right']} right) from {info['scenes']} scenes "
+          f"and {len(info.get('files', []))} labelled scans; "
           f"cross-validated AUC {info.get('cv_auc', float('nan'))}; threshold {model.threshold}")
     return 0
 

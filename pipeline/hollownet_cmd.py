@@ -25,7 +25,7 @@ import yaml
 from pipeline.cli import _positive_int
 from tiling.errors import ConfigError, InputFileError, PipelineError
 
-__all__ = ["add_parsers", "cmd_classify", "cmd_train"]
+__all__ = ["add_labelled_args", "add_parsers", "class_map_of", "cmd_classify", "cmd_train", "read_labelled"]
 
 
 def add_parsers(sub: Any) -> None:
@@ -48,20 +48,7 @@ def add_parsers(sub: Any) -> None:
     t.add_argument("--data-dir", help="data set cache (default $HOLLOWTREE_CACHE or ~/.cache/hollowtree)")
     t.add_argument("--overwrite", action="store_true", help="replace an existing weights file")
     t.add_argument("--no-progress", action="store_true", help="no progress bars")
-    t.add_argument("--from", dest="labelled", action="append", type=Path, default=[], metavar="FILE",
-                   help="a labelled LAS/LAZ scan to cut training samples from (repeatable): every instance "
-                        "of --instance-dim, its class from --class-dim; a fifth of the instances are held out "
-                        "for the test set")
-    t.add_argument("--class-dim", default="gt_class",
-                   help="the per-point class of --from files: an extra dimension holding hollowtree class "
-                        "ids, or 'classification' with --class-map (default gt_class)")
-    t.add_argument("--instance-dim", default="gt_instance",
-                   help="the per-point instance id of --from files (default gt_instance; 0 = none)")
-    t.add_argument("--class-map", default=None, metavar="CODE=CLASS,...",
-                   help="translate --class-dim values to classes, e.g. '2=ground,6=wall,64=arch,65=dome'; "
-                        "values not named are left out")
-    t.add_argument("--no-synthetic", action="store_true",
-                   help="train on the --from scans alone (no synthetic data sets)")
+    add_labelled_args(t, "training samples")
     t.set_defaults(func=cmd_train)
 
     c = sub.add_parser(
@@ -110,10 +97,10 @@ def cmd_train(args: argparse.Namespace) -> int:
         raise ConfigError(f"invalid training config: {exc}") from None
     if args.no_synthetic and not args.labelled:
         raise ConfigError("--no-synthetic needs at least one --from FILE")
-    class_map = _class_map(args.class_map)
+    class_map = class_map_of(args.class_map)
     labelled = []
     for path in args.labelled:
-        xyz, cls, inst = read_labelled(path, args.class_dim, args.instance_dim, class_map)
+        xyz, _, cls, inst = read_labelled(path, args.class_dim, args.instance_dim, class_map)
         tr, te = labelled_samples(xyz, cls, inst, seed=config.seed, variants=config.variants, source=path.name)
         print(f"{path}: {len(tr['labels'])} training and {len(te['labels'])} test samples "
               f"from {len(np.unique(inst[inst > 0]))} instances")
@@ -125,7 +112,24 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
-def _class_map(text: str | None) -> dict[int, int] | None:
+def add_labelled_args(p: argparse.ArgumentParser, what: str) -> None:
+    """The options that name a user's labelled scans (``train`` and ``fit-split``)."""
+    p.add_argument("--from", dest="labelled", action="append", type=Path, default=[], metavar="FILE",
+                   help=f"a labelled LAS/LAZ scan to take {what} from (repeatable): every instance of "
+                        "--instance-dim, its class from --class-dim")
+    p.add_argument("--class-dim", default="gt_class",
+                   help="the per-point class of --from files: an extra dimension holding hollowtree class "
+                        "ids, or any dimension (e.g. 'classification') with --class-map (default gt_class)")
+    p.add_argument("--instance-dim", default="gt_instance",
+                   help="the per-point instance id of --from files (default gt_instance; 0 = none)")
+    p.add_argument("--class-map", default=None, metavar="CODE=CLASS,...",
+                   help="translate --class-dim values to classes, e.g. '2=ground,6=wall,64=arch,65=dome'; "
+                        "values not named are left out")
+    p.add_argument("--no-synthetic", action="store_true",
+                   help="use the --from scans alone (no synthetic scenes)")
+
+
+def class_map_of(text: str | None) -> dict[int, int] | None:
     """``"2=ground,64=arch"`` -> ``{2: 1, 64: 4}``; None stays None."""
     from tiling.classes import class_id
 
@@ -143,9 +147,10 @@ def _class_map(text: str | None) -> dict[int, int] | None:
     return out
 
 
-def read_labelled(path: Path, class_dim: str, instance_dim: str,
-                  class_map: dict[int, int] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Points (metres, minus the file's lowest corner), classes and instances of a labelled scan.
+def read_labelled(path: Path, class_dim: str, instance_dim: str, class_map: dict[int, int] | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Points (metres, minus the file's lowest corner), record numbers, classes and
+    instances of a labelled scan.
 
     Raises
     ------
@@ -171,7 +176,7 @@ def read_labelled(path: Path, class_dim: str, instance_dim: str,
         raise ConfigError(f"{path}: {class_dim} holds {int(cls.max())}, not a hollowtree class id (0-{NUM_CLASSES - 1}); "
                           "pass --class-map CODE=CLASS,...")
     xyz = blocks.xyz - blocks.xyz.min(axis=0) if len(blocks.xyz) else blocks.xyz
-    return xyz, cls, np.asarray(blocks.extra[instance_dim]).astype(np.int64)
+    return xyz, blocks.index, cls, np.asarray(blocks.extra[instance_dim]).astype(np.int64)
 
 
 def _segment_file(path: Path) -> np.ndarray:

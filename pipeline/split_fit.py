@@ -37,23 +37,16 @@ def _scene(i: int):  # type: ignore[no-untyped-def]
     return recipe, random_scene(recipe, rng), rng
 
 
-def training_groups(i: int, work: Path) -> Path:
-    """The element groups of training scene ``i`` (made once, then read from ``work``)."""
+def _groups_of_scan(laz: Path, work: Path, out: Path, name: str, gt: tuple[np.ndarray, np.ndarray]) -> Path:
+    """Ingest and coarse-segment ``laz`` in ``work``; keep its element groups with the
+    ground truth ``gt`` (class and instance per record) as ``out``."""
     from pipeline.run import run_workflow
     from pipeline.tree_stage import group_starts
     from pipeline.workflow import load_workflow
-    from scenes.scanner import ScanParams
-    from scenes.synth import sidecar_path, write_scan
-    from tiling.readers import probe, read_blocks
     from tiling.store import RunStore
 
-    out = work / f"groups-{i}.npz"
-    if out.exists():
-        return out
-    recipe, scene, rng = _scene(i)
-    laz, url = work / f"scene-{i}.laz", work / f"scene-{i}.zarr"
+    url = work / f"{out.stem}.zarr"
     shutil.rmtree(url, ignore_errors=True)
-    write_scan(scene, laz, ScanParams(step_deg=float(rng.uniform(0.15, 0.3)), seed=i, noise=0.0025), workers=2)
     wf = load_workflow(_WORKFLOW, [f'input.files=["{laz}"]', "input.synth=null", f"store={url}",
                                    "tree.enabled=false", "outputs.las=null", "outputs.parquet=null",
                                    "outputs.png=null", "cluster.scheduler=sync"])
@@ -65,26 +58,69 @@ def training_groups(i: int, work: Path) -> Path:
     n = int(off[-1])
     xyz = store.read_slice("coarse/csr/xyz", 0, n).astype(np.float64) * scale
     rows = store.read_slice("coarse/csr/indices", 0, n).astype(np.int64)
+    gc, gi = gt
+    tmp = out.with_suffix(".tmp.npz")
+    np.savez_compressed(tmp, xyz=xyz.astype(np.float32), gc=gc[rows], gi=gi[rows], gstart=off[starts],
+                        recipe=name)
+    tmp.replace(out)
+    shutil.rmtree(url, ignore_errors=True)
+    return out
+
+
+def training_groups(i: int, work: Path) -> Path:
+    """The element groups of training scene ``i`` (made once, then read from ``work``)."""
+    from scenes.scanner import ScanParams
+    from scenes.synth import sidecar_path, write_scan
+    from tiling.readers import probe, read_blocks
+
+    out = work / f"groups-{i}.npz"
+    if out.exists():
+        return out
+    recipe, scene, rng = _scene(i)
+    laz = work / f"scene-{i}.laz"
+    write_scan(scene, laz, ScanParams(step_deg=float(rng.uniform(0.15, 0.3)), seed=i, noise=0.0025), workers=2)
     n_rec = probe(laz).point_count
     gc, gi = np.zeros(n_rec, dtype=np.uint8), np.zeros(n_rec, dtype=np.int32)
     for blk in read_blocks(laz):  # ground truth by record number (coarse/csr/indices)
         gc[blk.index] = blk.extra["gt_class"]
         gi[blk.index] = blk.extra["gt_instance"]
-    tmp = work / f"groups-{i}.tmp.npz"
-    np.savez_compressed(tmp, xyz=xyz.astype(np.float32), gc=gc[rows], gi=gi[rows], gstart=off[starts],
-                        recipe=recipe)
-    tmp.replace(out)
+    _groups_of_scan(laz, work, out, recipe, (gc, gi))
     laz.unlink()
     sidecar_path(laz).unlink(missing_ok=True)
-    shutil.rmtree(url, ignore_errors=True)
     return out
 
 
+def file_groups(path: Path, work: Path, *, class_dim: str = "gt_class", instance_dim: str = "gt_instance",
+                class_map: dict[int, int] | None = None) -> Path:
+    """The element groups of a user's labelled scan ``path`` (made once per file, its
+    dimensions and map, then read from ``work``)."""
+    import hashlib
+    import json
+
+    from pipeline.hollownet_cmd import read_labelled
+
+    key = hashlib.sha256(json.dumps([str(Path(path).resolve()), Path(path).stat().st_size, class_dim, instance_dim,
+                                     sorted((class_map or {}).items())]).encode()).hexdigest()[:12]
+    out = work / f"groups-file-{Path(path).stem}-{key}.npz"
+    if out.exists():
+        return out
+    _, index, cls, inst = read_labelled(Path(path), class_dim, instance_dim, class_map)
+    index = index.astype(np.int64)
+    n_rec = int(index.max(initial=-1)) + 1
+    gc, gi = np.zeros(n_rec, dtype=np.uint8), np.zeros(n_rec, dtype=np.int32)
+    gc[index], gi[index] = cls, inst
+    return _groups_of_scan(Path(path), work, out, Path(path).stem, (gc, gi))
+
+
 def fit_split_from_scenes(work: Path, *, scenes: tuple[int, ...] = TRAINING_SCENES, seed: int = 0,
-                          threshold: float = 0.5, on_scene: Callable[[int], None] | None = None):  # type: ignore[no-untyped-def]
-    """Make (or reuse) every scene's groups in ``work``, collect the proposals, fit."""
+                          threshold: float = 0.5, on_scene: Callable[[int], None] | None = None,
+                          files: tuple[Path, ...] = (), class_dim: str = "gt_class",
+                          instance_dim: str = "gt_instance", class_map: dict[int, int] | None = None):  # type: ignore[no-untyped-def]
+    """Make (or reuse) every scene's and labelled file's groups in ``work``, collect the
+    proposals, fit. ``scenes=()`` fits on the files alone."""
     from hollownet.predict import Classifier
-    from tree.fit_split import SplitSamples, fit_split_model, proposal_samples
+    from tiling.errors import ConfigError
+    from tree.fit_split import GOOD_TARGET, SplitSamples, fit_split_model, proposal_samples
 
     work.mkdir(parents=True, exist_ok=True)
     clf = Classifier.get(None)
@@ -94,6 +130,20 @@ def fit_split_from_scenes(work: Path, *, scenes: tuple[int, ...] = TRAINING_SCEN
         parts.append(proposal_samples(d["xyz"], d["gc"], d["gi"], d["gstart"], clf, scene=f"s{i}"))
         if on_scene is not None:
             on_scene(i)
-    return fit_split_model(SplitSamples.concat(parts), seed=seed, threshold=threshold,
+    for k, f in enumerate(files):
+        d = np.load(file_groups(f, work, class_dim=class_dim, instance_dim=instance_dim, class_map=class_map))
+        parts.append(proposal_samples(d["xyz"], d["gc"], d["gi"], d["gstart"], clf, scene=f"f{k}"))
+        if on_scene is not None:
+            on_scene(-1 - k)
+    if not any(len(p) for p in parts):
+        raise ConfigError("no split proposals to fit: the scans hold no element group the tree could split")
+    samples = SplitSamples.concat(parts)
+    good = samples.target >= GOOD_TARGET
+    data = "element groups of workflows/local.yaml on " + " and ".join(
+        ([f"{len(scenes)} random scenes"] if scenes else []) + ([f"{len(files)} labelled scans"] if files else []))
+    if good.all() or not good.any():
+        raise ConfigError(f"the scans give {len(samples)} split proposals, all {'right' if good.all() else 'wrong'}: "
+                          "the split model needs both; add labelled scans or keep the synthetic scenes")
+    return fit_split_model(samples, seed=seed, threshold=threshold,
                            info={"classifier": "HollowNet (shipped weights)", "scenes": len(scenes),
-                                 "data": "element groups of workflows/local.yaml on random scenes"})
+                                 "files": [str(f) for f in files], "data": data})

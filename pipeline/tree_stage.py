@@ -33,6 +33,7 @@ import json
 import math
 import time
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -98,6 +99,9 @@ class TreeStageParams:
         Points per task (small segments are batched; a larger segment is one task).
     weights : str or None
         HollowNet weights; None = the shipped default.
+    split_model : str or None
+        The split model's JSON (``hollowtree fit-split --out``); None = the shipped
+        ``tree/data/split-v1.json``.
     seed : int
         Segment ``g`` builds its tree with ``SeedSequence([seed, g])``.
     roof_min_height : float or None
@@ -125,6 +129,7 @@ class TreeStageParams:
     threshold: float | None = None
     batch_points: int = 200_000
     weights: str | None = None
+    split_model: str | None = None
     seed: int = 0
     roof_min_height: float | None = 1.5
     max_group_points: int = 1_000_000
@@ -140,6 +145,10 @@ class TreeStageParams:
         if self.decision not in DECISIONS:
             raise ConfigError(f"The 'decision' parameter of tree must be one of {list(DECISIONS)}. "
                               f"Got {self.decision!r} instead.")
+        for name in ("weights", "split_model"):
+            path = getattr(self, name)
+            if path is not None and not Path(path).is_file():
+                raise ConfigError(f"tree.{name}: file {path} does not exist")
         if not (isinstance(self.batch_points, int) and self.batch_points >= 1):
             raise ConfigError(f"The 'batch_points' parameter of tree must be an int >= 1. Got {self.batch_points!r} instead.")
         if isinstance(self.max_group_points, bool) or not isinstance(self.max_group_points, int) \
@@ -164,7 +173,7 @@ class TreeStageParams:
     @classmethod
     def from_workflow(cls, section: Any) -> TreeStageParams:
         return cls(max_depth=section.max_depth, look_ahead=section.look_ahead, decision=section.decision, threshold=section.threshold,
-                   batch_points=section.batch_points, weights=section.weights, seed=section.seed, roof_min_height=section.roof_min_height,
+                   batch_points=section.batch_points, weights=section.weights, split_model=section.split_model, seed=section.seed, roof_min_height=section.roof_min_height,
                    max_group_points=section.max_group_points, pillar_max_height=section.pillar_max_height,
                    other_max_base=section.other_max_base, other_max_size=section.other_max_size)
 
@@ -256,7 +265,7 @@ def _group_tree(pts: np.ndarray, s: int, params: TreeStageParams, clf: Any, grou
     res = build_tree(pts - center, clf, max_depth=params.max_depth, threshold=params.threshold,
                      look_ahead=params.look_ahead,
                      rng=np.random.SeedSequence([params.seed, s + 1]),
-                     split=load_split_model() if params.decision == "split-model" else None)
+                     split=load_split_model(params.split_model) if params.decision == "split-model" else None)
     if params.roof_min_height is not None and ground_level is not None:
         res_class = ground_or_roof(res.class_id, pts[:, 2], res.leaf, ground_level, params.roof_min_height)
     else:

@@ -149,6 +149,8 @@ class TreeSection(_Section):
     threshold: float | None = Field(None, description="a split is kept when its score (the split model's probability, or xi) >= this; null = the model's own")
     batch_points: PosInt = Field(200_000, description="points per tree task (small segments are batched)")
     weights: str | None = Field(None, description="HollowNet weights file; null = the shipped default")
+    split_model: str | None = Field(
+        None, description="split model file (written by hollowtree fit-split); null = the shipped tree/data/split-v1.json")
     seed: int = Field(0, description="segment g builds its tree with seed [seed, g]")
     roof_min_height: Annotated[float, Field(ge=0)] | None = Field(
         1.5, description="a part classed ground or roof is roof when its median height above the local ground is at least this (m); null = HollowNet's class as it is")
@@ -321,6 +323,13 @@ def load_workflow(path: str | Path, overrides: Sequence[str] = (), *, check_file
             msg += f" (from --set {setby})"
         more = f" (and {exc.error_count() - 1} more)" if exc.error_count() > 1 else ""
         raise WorkflowError(f"{path}{where}: {key or '(top level)'}: {msg}{more}") from None
+    if check_files:
+        for key in ("weights", "split_model"):
+            f = getattr(wf.tree, key)
+            if f is not None and not Path(f).is_file():
+                line = _line_of(node, ["tree", key])
+                where = f":{line}" if line is not None else ""
+                raise WorkflowError(f"{path}{where}: tree.{key}: file {f} does not exist")
     if check_files and wf.input.files:
         for i, f in enumerate(wf.input.files):
             if not Path(f).is_file():

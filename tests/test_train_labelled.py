@@ -72,6 +72,37 @@ def test_train_from_a_labelled_scan_and_run_with_its_weights(labelled, tmp_path)
     assert "labels:" in run.stdout
 
 
+def test_fit_split_from_a_labelled_scan_and_run_with_the_model(labelled, tmp_path):
+    d = labelled
+    arcade = tmp_path / "arcade.laz"
+    assert _cli("synth", "arcade", "--seed", "1", "--points", "150000", "--out", str(arcade),
+                "--no-progress").returncode == 0
+    proc = _cli("fit-split", "--from", str(arcade), "--no-synthetic", "--work", str(tmp_path / "work"),
+                "--out", str(tmp_path / "split.json"), "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    assert "and 1 labelled scans" in proc.stdout
+    model = json.loads((tmp_path / "split.json").read_text())
+    assert model["info"]["files"] == [str(arcade)]
+    wf = tmp_path / "wf.yaml"
+    wf.write_text(f"input: {{files: [{d / 'lab.laz'}]}}\nstore: {tmp_path / 's.zarr'}\n"
+                  f"tree: {{split_model: {tmp_path / 'split.json'}}}\ncluster: {{scheduler: sync}}\n")
+    run = _cli("run", str(wf), "--no-progress")
+    assert run.returncode == 0, run.stderr
+    missing = tmp_path / "wf2.yaml"
+    missing.write_text(wf.read_text().replace("split.json", "nope.json"))
+    bad = _cli("run", str(missing), "--no-progress")
+    assert bad.returncode == 2
+    assert f"tree.split_model: file {tmp_path / 'nope.json'} does not exist" in bad.stderr
+
+
+def test_fit_split_on_scans_without_a_right_split_is_one_line(labelled, tmp_path):
+    proc = _cli("fit-split", "--from", str(labelled / "lab.laz"), "--no-synthetic", "--work", str(tmp_path),
+                "--out", str(tmp_path / "split.json"), "--no-progress")
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [
+        next(line for line in proc.stderr.splitlines() if "split proposals, all" in line)]
+
+
 def test_classification_with_a_class_map_and_a_named_instance_dim(labelled, tmp_path):
     src = laspy.read(labelled / "lab.laz")
     codes = {1: 2, 2: 6, 3: 6, 5: 65, 7: 67, 8: 1}  # hollowtree class -> LAS code
