@@ -259,6 +259,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="output JSON (default split-v1.json; the shipped one is tree/data/split-v1.json)")
     fs.add_argument("--overwrite", action="store_true", help="replace an existing output")
     fs.add_argument("--no-progress", action="store_true", help="no progress bar")
+    fs.add_argument("--procedural", type=int, default=0, metavar="N",
+                    help="add the first N procedural training sites (scenes/procedural.py; training seeds only)")
+    fs.add_argument("--procedural-points", type=_positive_int, default=600_000,
+                    help="points per procedural site (default 600,000)")
     add_labelled_args(fs, "element groups")
     fs.set_defaults(func=_cmd_fit_split)
 
@@ -358,6 +362,7 @@ def _cmd_fit_split(args: argparse.Namespace) -> int:
 
     from pipeline.hollownet_cmd import class_map_of
     from pipeline.split_fit import TRAINING_SCENES, fit_split_from_scenes
+    from scenes.procedural import split_seeds
     from tiling.errors import ConfigError
 
     if args.out.exists() and not args.overwrite:
@@ -366,22 +371,26 @@ def _cmd_fit_split(args: argparse.Namespace) -> int:
         raise ConfigError(f"{args.out}: folder {args.out.parent} does not exist")
     if not 0.0 < args.threshold < 1.0:
         raise ConfigError(f"--threshold must be between 0 and 1 (a probability); got {args.threshold}")
-    if args.no_synthetic and not args.labelled:
-        raise ConfigError("--no-synthetic needs at least one --from FILE")
+    if args.procedural < 0:
+        raise ConfigError(f"--procedural must be a count >= 0; got {args.procedural}")
+    if args.no_synthetic and not args.labelled and not args.procedural:
+        raise ConfigError("--no-synthetic needs at least one --from FILE or --procedural N")
+    procedural = tuple(split_seeds("train", args.procedural)) if args.procedural else ()
     for f in args.labelled:
         if not f.is_file():
             raise ConfigError(f"--from {f}: file does not exist")
     scenes = () if args.no_synthetic else TRAINING_SCENES
-    with tqdm(total=len(scenes) + len(args.labelled), unit="scene", desc="fit-split",
+    with tqdm(total=len(scenes) + len(procedural) + len(args.labelled), unit="scene", desc="fit-split",
               disable=args.no_progress) as bar:
         model = fit_split_from_scenes(args.work, scenes=scenes, seed=args.seed, threshold=args.threshold,
                                       on_scene=lambda i: bar.update(1), files=tuple(args.labelled),
                                       class_dim=args.class_dim, instance_dim=args.instance_dim,
-                                      class_map=class_map_of(args.class_map))
+                                      class_map=class_map_of(args.class_map), procedural=procedural,
+                                      procedural_points=args.procedural_points)
     model.save(args.out)
     info = model.info
-    print(f"{args.out}: {info['samples']} proposals ({info['right']} right) from {info['scenes']} scenes "
-          f"and {len(info.get('files', []))} labelled scans; "
+    print(f"{args.out}: {info['samples']} proposals ({info['right']} right) from {info['scenes']} scenes, "
+          f"{len(info.get('procedural', []))} procedural sites and {len(info.get('files', []))} labelled scans; "
           f"cross-validated AUC {info.get('cv_auc', float('nan'))}; threshold {model.threshold}")
     return 0
 

@@ -9,7 +9,9 @@ the groups into proposals and fits the model.
 
 Scenes: ``i`` in ``0..39`` is the HollowNet recipe ``sorted(RECIPES)[i % 5]``, ``i`` in
 ``100..111`` storeyed arcades; each is drawn from ``default_rng([7, i])`` and scanned at a
-step drawn from 0.15-0.3 degrees (scanner seed ``i``, noise 2.5 mm).
+step drawn from 0.15-0.3 degrees (scanner seed ``i``, noise 2.5 mm). Procedural sites
+(:mod:`scenes.procedural`, training seeds only) and a user's labelled scans can be added
+or used instead (:func:`procedural_groups`, :func:`file_groups`).
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["TRAINING_SCENES", "fit_split_from_scenes", "training_groups"]
+__all__ = ["TRAINING_SCENES", "file_groups", "fit_split_from_scenes", "procedural_groups", "training_groups"]
 
 #: Scene numbers of the training set (module docstring).
 TRAINING_SCENES: tuple[int, ...] = tuple(range(40)) + tuple(range(100, 112))
@@ -90,6 +92,42 @@ def training_groups(i: int, work: Path) -> Path:
     return out
 
 
+def procedural_groups(seed: int, work: Path, *, n_points: int = 600_000) -> Path:
+    """The element groups of the procedural site of training seed ``seed``, scanned at
+    about ``n_points`` points with the seed's own noise and registration error.
+
+    Raises
+    ------
+    ConfigError
+        If ``seed`` is not a training seed (``scenes.procedural.SPLITS["train"]``).
+    """
+    from scenes.procedural import SPLITS, scan_draw
+    from scenes.synth import sidecar_path, synth
+    from tiling.errors import ConfigError
+    from tiling.readers import probe, read_blocks
+
+    lo, hi = SPLITS["train"]
+    if not lo <= seed < hi:
+        raise ConfigError(f"procedural seed {seed} is not a training seed ({lo}-{hi - 1}): the split model is "
+                          "fitted on training seeds only")
+    out = work / f"groups-gen-{seed}-{n_points}.npz"
+    if out.exists():
+        return out
+    laz = work / f"gen-{seed}.laz"
+    d = scan_draw(seed)
+    synth("gen", laz, n_points=n_points, seed=seed, noise=d.noise, registration_error=d.registration_error,
+          overwrite=True, workers=2)
+    n_rec = probe(laz).point_count
+    gc, gi = np.zeros(n_rec, dtype=np.uint8), np.zeros(n_rec, dtype=np.int32)
+    for blk in read_blocks(laz):
+        gc[blk.index] = blk.extra["gt_class"]
+        gi[blk.index] = blk.extra["gt_instance"]
+    _groups_of_scan(laz, work, out, f"gen-{seed}", (gc, gi))
+    laz.unlink()
+    sidecar_path(laz).unlink(missing_ok=True)
+    return out
+
+
 def file_groups(path: Path, work: Path, *, class_dim: str = "gt_class", instance_dim: str = "gt_instance",
                 class_map: dict[int, int] | None = None) -> Path:
     """The element groups of a user's labelled scan ``path`` (made once per file, its
@@ -115,9 +153,10 @@ def file_groups(path: Path, work: Path, *, class_dim: str = "gt_class", instance
 def fit_split_from_scenes(work: Path, *, scenes: tuple[int, ...] = TRAINING_SCENES, seed: int = 0,
                           threshold: float = 0.5, on_scene: Callable[[int], None] | None = None,
                           files: tuple[Path, ...] = (), class_dim: str = "gt_class",
-                          instance_dim: str = "gt_instance", class_map: dict[int, int] | None = None):  # type: ignore[no-untyped-def]
-    """Make (or reuse) every scene's and labelled file's groups in ``work``, collect the
-    proposals, fit. ``scenes=()`` fits on the files alone."""
+                          instance_dim: str = "gt_instance", class_map: dict[int, int] | None = None,
+                          procedural: tuple[int, ...] = (), procedural_points: int = 600_000):  # type: ignore[no-untyped-def]
+    """Make (or reuse) the groups of every scene, procedural training site and labelled
+    file in ``work``, collect the proposals, fit. ``scenes=()`` leaves the random scenes out."""
     from hollownet.predict import Classifier
     from tiling.errors import ConfigError
     from tree.fit_split import GOOD_TARGET, SplitSamples, fit_split_model, proposal_samples
@@ -130,6 +169,11 @@ def fit_split_from_scenes(work: Path, *, scenes: tuple[int, ...] = TRAINING_SCEN
         parts.append(proposal_samples(d["xyz"], d["gc"], d["gi"], d["gstart"], clf, scene=f"s{i}"))
         if on_scene is not None:
             on_scene(i)
+    for seed in procedural:
+        d = np.load(procedural_groups(seed, work, n_points=procedural_points))
+        parts.append(proposal_samples(d["xyz"], d["gc"], d["gi"], d["gstart"], clf, scene=f"g{seed}"))
+        if on_scene is not None:
+            on_scene(seed)
     for k, f in enumerate(files):
         d = np.load(file_groups(f, work, class_dim=class_dim, instance_dim=instance_dim, class_map=class_map))
         parts.append(proposal_samples(d["xyz"], d["gc"], d["gi"], d["gstart"], clf, scene=f"f{k}"))
@@ -140,10 +184,12 @@ def fit_split_from_scenes(work: Path, *, scenes: tuple[int, ...] = TRAINING_SCEN
     samples = SplitSamples.concat(parts)
     good = samples.target >= GOOD_TARGET
     data = "element groups of workflows/local.yaml on " + " and ".join(
-        ([f"{len(scenes)} random scenes"] if scenes else []) + ([f"{len(files)} labelled scans"] if files else []))
+        ([f"{len(scenes)} random scenes"] if scenes else [])
+        + ([f"{len(procedural)} procedural training sites ({procedural_points:,} points)"] if procedural else [])
+        + ([f"{len(files)} labelled scans"] if files else []))
     if good.all() or not good.any():
         raise ConfigError(f"the scans give {len(samples)} split proposals, all {'right' if good.all() else 'wrong'}: "
                           "the split model needs both; add labelled scans or keep the synthetic scenes")
     return fit_split_model(samples, seed=seed, threshold=threshold,
                            info={"classifier": "HollowNet (shipped weights)", "scenes": len(scenes),
-                                 "files": [str(f) for f in files], "data": data})
+                                 "procedural": list(procedural), "files": [str(f) for f in files], "data": data})

@@ -80,7 +80,7 @@ def test_fit_split_from_a_labelled_scan_and_run_with_the_model(labelled, tmp_pat
     proc = _cli("fit-split", "--from", str(arcade), "--no-synthetic", "--work", str(tmp_path / "work"),
                 "--out", str(tmp_path / "split.json"), "--no-progress")
     assert proc.returncode == 0, proc.stderr
-    assert "and 1 labelled scans" in proc.stdout
+    assert "0 procedural sites and 1 labelled scans" in proc.stdout
     model = json.loads((tmp_path / "split.json").read_text())
     assert model["info"]["files"] == [str(arcade)]
     wf = tmp_path / "wf.yaml"
@@ -139,3 +139,10 @@ def test_no_synthetic_needs_a_labelled_scan(tmp_path):
     proc = _cli("train", "--no-synthetic", "--out", str(tmp_path / "w.pt"))
     assert proc.returncode == 2
     assert "--no-synthetic needs at least one --from FILE" in proc.stderr
+
+
+def test_the_split_model_fits_on_training_seeds_only(tmp_path):
+    from pipeline.split_fit import procedural_groups
+
+    with pytest.raises(ConfigError, match="procedural seed 200000 is not a training seed"):
+        procedural_groups(200_000, tmp_path)
