@@ -20,7 +20,7 @@ An element counts as found at IoU >= 0.5 (greedy one-to-one matching); recall is
 ``--work`` and reused by a later run with the same arguments.
 
 Run: ``python benchmarks/bench_generalize.py [--split test] [--sites 30] [--family F]
-[--points 500000 2000000] [--no-energy] [--work out/generalize] [--json PATH]``.
+[--points 500000 2000000] [--no-energy] [--set KEY=VALUE] [--work out/generalize] [--json PATH]``.
 """
 
 from __future__ import annotations
@@ -70,6 +70,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--family", choices=FAMILIES, default=None, help="only this family's seeds of the split")
     ap.add_argument("--points", type=float, nargs=2, default=(5e5, 2e6), metavar=("MIN", "MAX"))
     ap.add_argument("--no-energy", action="store_true", help="skip the paper's energy path")
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                    help="a workflow override for every run (e.g. tree.split_model=PATH), repeatable")
     ap.add_argument("--work", type=Path, default=REPO / "out" / "generalize")
     ap.add_argument("--json", type=Path, default=None, help="default benchmarks/results/generalize-<split>.json")
     args = ap.parse_args(argv)
@@ -92,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     runs = {"tree": []} if args.no_energy else {"tree": [], "energy": []}
     for key in runs:
         _, overrides = METHODS[key]
-        results, _ = evaluate_inputs([str(p) for p in scans], overrides=overrides, store_dir=str(args.work / "stores"),
+        results, _ = evaluate_inputs([str(p) for p in scans], overrides=[*args.overrides, *overrides], store_dir=str(args.work / "stores"),
                                      json_path=args.work / f"evaluate-{key}.json", png_dir=args.work / f"png-{key}",
                                      progress=False, say=lambda _line: None)
         runs[key] = results
@@ -134,6 +136,7 @@ def main(argv: list[str] | None = None) -> int:
     out = args.json or REPO / "benchmarks" / "results" / f"generalize-{args.split}.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"benchmark": "bench_generalize", "split": args.split, "family": args.family,
+                               "overrides": args.overrides,
                                "seeds": seeds, "points": list(args.points), "workflow": "workflows/local.yaml",
                                "totals": total, "families": fam, "sites": sites, "seconds": round(wall, 1)},
                               indent=1) + "\n")

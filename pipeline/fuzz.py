@@ -126,8 +126,8 @@ def run_fuzz(spec: FuzzSpec, work: Path, *, base: Path = DEFAULT_WORKFLOW, keep:
         outcome.lines = rep.lines
         outcome.class_counts = rep.class_counts
         if n:
-            xyz_in = np.stack([np.asarray(c) for c in (lambda f: (f.x, f.y, f.z))(laspy.read(scan))], axis=1)
-            _check(work, n, xyz_in)
+            src = laspy.read(scan)
+            _check(work, n, np.stack([np.asarray(src.x), np.asarray(src.y), np.asarray(src.z)], axis=1))
     except PipelineError as exc:
         msg = str(exc)
         if n == 0 and "\n" not in msg:

@@ -69,11 +69,23 @@ def _groups_of_scan(laz: Path, work: Path, out: Path, name: str, gt: tuple[np.nd
     return out
 
 
+def _synthetic_gt(laz: Path) -> tuple[np.ndarray, np.ndarray]:
+    """``gt_class`` and ``gt_instance`` of a synthetic scan by record number (the CSR's
+    ``coarse/csr/indices``)."""
+    from tiling.readers import probe, read_blocks
+
+    n_rec = probe(laz).point_count
+    gc, gi = np.zeros(n_rec, dtype=np.uint8), np.zeros(n_rec, dtype=np.int32)
+    for blk in read_blocks(laz):
+        gc[blk.index] = blk.extra["gt_class"]
+        gi[blk.index] = blk.extra["gt_instance"]
+    return gc, gi
+
+
 def training_groups(i: int, work: Path) -> Path:
     """The element groups of training scene ``i`` (made once, then read from ``work``)."""
     from scenes.scanner import ScanParams
     from scenes.synth import sidecar_path, write_scan
-    from tiling.readers import probe, read_blocks
 
     out = work / f"groups-{i}.npz"
     if out.exists():
@@ -81,12 +93,7 @@ def training_groups(i: int, work: Path) -> Path:
     recipe, scene, rng = _scene(i)
     laz = work / f"scene-{i}.laz"
     write_scan(scene, laz, ScanParams(step_deg=float(rng.uniform(0.15, 0.3)), seed=i, noise=0.0025), workers=2)
-    n_rec = probe(laz).point_count
-    gc, gi = np.zeros(n_rec, dtype=np.uint8), np.zeros(n_rec, dtype=np.int32)
-    for blk in read_blocks(laz):  # ground truth by record number (coarse/csr/indices)
-        gc[blk.index] = blk.extra["gt_class"]
-        gi[blk.index] = blk.extra["gt_instance"]
-    _groups_of_scan(laz, work, out, recipe, (gc, gi))
+    _groups_of_scan(laz, work, out, recipe, _synthetic_gt(laz))
     laz.unlink()
     sidecar_path(laz).unlink(missing_ok=True)
     return out
@@ -104,7 +111,6 @@ def procedural_groups(seed: int, work: Path, *, n_points: int = 600_000) -> Path
     from scenes.procedural import SPLITS, scan_draw
     from scenes.synth import sidecar_path, synth
     from tiling.errors import ConfigError
-    from tiling.readers import probe, read_blocks
 
     lo, hi = SPLITS["train"]
     if not lo <= seed < hi:
@@ -117,12 +123,7 @@ def procedural_groups(seed: int, work: Path, *, n_points: int = 600_000) -> Path
     d = scan_draw(seed)
     synth("gen", laz, n_points=n_points, seed=seed, noise=d.noise, registration_error=d.registration_error,
           overwrite=True, workers=2)
-    n_rec = probe(laz).point_count
-    gc, gi = np.zeros(n_rec, dtype=np.uint8), np.zeros(n_rec, dtype=np.int32)
-    for blk in read_blocks(laz):
-        gc[blk.index] = blk.extra["gt_class"]
-        gi[blk.index] = blk.extra["gt_instance"]
-    _groups_of_scan(laz, work, out, f"gen-{seed}", (gc, gi))
+    _groups_of_scan(laz, work, out, f"gen-{seed}", _synthetic_gt(laz))
     laz.unlink()
     sidecar_path(laz).unlink(missing_ok=True)
     return out

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from scenes._builders import EYE, Jitter, add_arcade, add_clutter, counts
+from scenes._builders import EYE, Jitter, add_arcade, add_clutter
 from scenes.elements import arcade, chattri, dome, ground, minaret, pillar, roof_slab, wall
 from scenes.scanner import RayCaster, ScanParams, estimate_step, scan
 from scenes.scene import Scene, SceneBuilder
@@ -262,14 +262,6 @@ def fuzz_points(spec: FuzzSpec) -> dict[str, npt.NDArray[Any]]:
     if spec.survey:
         pts["xyz"] = pts["xyz"] + SURVEY_SHIFT
     return pts
-
-
-def expected_elements(spec: FuzzSpec) -> dict[ClassId, int]:
-    """Element instances a scene spec builds (arcade bays counted per bay)."""
-    if spec.kind != "scene":
-        return counts()
-    scene = fuzz_scene(spec)
-    return {c: n for c, n in scene.element_counts().items() if c in counts()}
 
 
 def fuzz_specs(max_points: int = 300_000) -> Any:
