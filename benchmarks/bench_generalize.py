@@ -53,6 +53,19 @@ def _points(seed: int, lo: float, hi: float) -> int:
     return int(round(math.exp(rng.uniform(math.log(lo), math.log(hi))), -3))
 
 
+def _element_sizes(path: Path) -> dict[str, list[int]]:
+    """Points of every ground-truth element instance of a scan, per element class."""
+    from tiling.readers import PointBlock, read_blocks
+
+    b = PointBlock.concat(read_blocks(path))
+    cls, inst = np.asarray(b.extra["gt_class"]), np.asarray(b.extra["gt_instance"]).astype(np.int64)
+    out = {}
+    for c in ELEMENT_CLASSES:
+        _, n = np.unique(inst[(cls == int(c)) & (inst > 0)], return_counts=True)
+        out[ClassId(c).label] = n.tolist()
+    return out
+
+
 def _table(rows: dict[str, dict[str, dict[str, int]]], title: str) -> str:
     lines = [title, f"{'method':<15}{'class':<9}{'GT':>6}{'found':>7}{'recall':>8}{'pred':>6}{'prec':>7}"]
     for method, per in rows.items():
@@ -123,6 +136,18 @@ def main(argv: list[str] | None = None) -> int:
                 sites.append({"seed": seed, "family": f, "input": r.input, "n_points": r.n_points,
                               "pipeline_seconds": r.pipeline_seconds})
     print(_table(total, f"{args.split} split, {len(seeds)} sites ({', '.join(sorted({family_of(s) for s in seeds}))})"))
+    # How visible the ground-truth elements are: an element of fewer points than the
+    # default workflow's free_min_points (200) can only be found inside a larger segment.
+    sizes: dict[str, list[int]] = defaultdict(list)
+    for p in scans:
+        for name, n in _element_sizes(p).items():
+            sizes[name] += n
+    visibility = {name: {"elements": len(n), "median_points": int(np.median(n)) if n else 0,
+                         "under_200": int(np.sum(np.asarray(n) < 200)), "under_1000": int(np.sum(np.asarray(n) < 1000))}
+                  for name, n in sizes.items()}
+    print(f"{'class':<9}{'elements':>9}{'median pts':>11}{'< 200 pts':>10}{'< 1000 pts':>11}")
+    for name, v in visibility.items():
+        print(f"{name:<9}{v['elements']:>9}{v['median_points']:>11}{v['under_200']:>10}{v['under_1000']:>11}")
     for f in sorted(fam):
         print(_table(fam[f], f"family {f}"))
     all_found = {m: (sum(c["found"] for c in per.values()), sum(c["gt"] for c in per.values()),
@@ -138,7 +163,8 @@ def main(argv: list[str] | None = None) -> int:
     out.write_text(json.dumps({"benchmark": "bench_generalize", "split": args.split, "family": args.family,
                                "overrides": args.overrides,
                                "seeds": seeds, "points": list(args.points), "workflow": "workflows/local.yaml",
-                               "totals": total, "families": fam, "sites": sites, "seconds": round(wall, 1)},
+                               "totals": total, "families": fam, "visibility": visibility, "sites": sites,
+                               "seconds": round(wall, 1)},
                               indent=1) + "\n")
     print(f"results: {out}")
     return 0
