@@ -195,6 +195,11 @@ def run_workflow(
         store = RunStore.open(url, mode="a")
         store.update_attrs({"workflow": new_params})
         report.class_counts = _class_counts(store)
+        if set(report.class_counts) <= {CLASS_NAMES[0]}:  # nothing found: say so, once
+            report.lines.append(f"labels: nothing could be labelled in {report.class_counts.get(CLASS_NAMES[0], 0):,} "
+                                "points (no surface or element found: too few, too sparse or too noisy points?); "
+                                "every point keeps class 0")
+            say(report.lines[-1])
         from pipeline.export import write_outputs
 
         for line in write_outputs(store, wf, progress=progress):

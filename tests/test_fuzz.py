@@ -44,6 +44,15 @@ def test_named_corner_cases(spec, tmp_path):
     _assert_runs(spec, tmp_path)
 
 
+def test_a_scan_that_cannot_be_labelled_says_so_in_one_line(tmp_path):
+    out = run_fuzz(FuzzSpec(kind="single", seed=0, n_points=3), tmp_path / "scan")
+    assert out.status == "ok"
+    assert out.class_counts == {"unclassified": 3}
+    said = [line for line in out.lines if "nothing could be labelled" in line]
+    assert said == ["labels: nothing could be labelled in 3 points (no surface or element found: too few, too "
+                    "sparse or too noisy points?); every point keeps class 0"]
+
+
 def test_a_file_with_no_point_is_refused_in_one_line(tmp_path):
     scan = tmp_path / "empty.las"
     write_points(scan, {"xyz": np.zeros((0, 3)), "gt_class": np.zeros(0, np.uint8),
