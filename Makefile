@@ -21,6 +21,7 @@ $(STAMP): pyproject.toml
 # mosque on first use and runs every stage on it on a local Dask cluster; a rerun resumes
 # (or says there is nothing to do).
 demo: $(STAMP)
+	mkdir -p out
 	$(VENV)/bin/hollowtree run workflows/local.yaml
 
 # Two pytest workers, one per core, each taking whole files (a file's module fixtures are
