@@ -137,13 +137,11 @@ def class_map_of(text: str | None) -> dict[int, int] | None:
         return None
     out: dict[int, int] = {}
     for item in filter(None, (t.strip() for t in text.split(","))):
-        code, sep, name = item.partition("=")
+        code, _, name = item.partition("=")
         try:
-            out[int(code)] = int(class_id(name.strip()))
-        except (ValueError, KeyError):
-            sep = ""
-        if not sep:
-            raise ConfigError(f"--class-map: {item!r} is not CODE=CLASS (a whole number and a class name)")
+            out[int(code)] = int(class_id(name))
+        except ValueError:  # not a whole number, or not a class name (also: no '=')
+            raise ConfigError(f"--class-map: {item!r} is not CODE=CLASS (a whole number and a class name)") from None
     return out
 
 
