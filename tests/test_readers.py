@@ -581,3 +581,27 @@ def test_pdal_missing_is_a_clear_error(tmp_path):
     with pytest.raises(UnsupportedInputError, match="optional package 'pdal'") as err:
         list(read_blocks(pipe))
     one_line(err, pipe)
+
+
+def _las_with_empty_wkt(path: Path) -> Path:
+    """A LAS whose WKT VLR holds two quote marks, as ../shared's warsaw_small.las does."""
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.vlrs.append(laspy.vlrs.known.WktCoordinateSystemVlr("''"))
+    las = laspy.LasData(header)
+    rng = np.random.default_rng(0)
+    las.x, las.y, las.z = (rng.uniform(0, 10, 50) for _ in range(3))
+    las.write(path)
+    return path
+
+
+@pytest.mark.parametrize("source", ["made", "warsaw"])
+def test_an_empty_crs_vlr_is_no_crs_in_ingest_and_export(tmp_path, source, caplog):
+    from pipeline.export import _out_header
+
+    path = _las_with_empty_wkt(tmp_path / "empty-wkt.las") if source == "made" else external("pdal/warsaw_small.las")
+    info = probe(path)
+    assert info.crs_wkt is None
+    with caplog.at_level("WARNING"):
+        header = _out_header([info.to_dict()])
+    assert header.parse_crs() is None
+    assert any("CRS VLR could not be parsed" in r.getMessage() for r in caplog.records)
