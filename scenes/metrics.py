@@ -46,7 +46,8 @@ import numpy.typing as npt
 
 from tiling.classes import CLASS_NAMES, NUM_CLASSES, class_id
 
-__all__ = ["LabelCounts", "ClassScore", "Evaluation", "count_labels", "score_counts", "evaluate_labels"]
+__all__ = ["LOSS_BUCKETS", "LabelCounts", "ClassScore", "Evaluation", "count_labels", "evaluate_labels", "loss_buckets",
+           "score_counts"]
 
 _U64 = npt.NDArray[np.uint64]
 _I64 = npt.NDArray[np.int64]
@@ -352,3 +353,116 @@ def evaluate_labels(
     """
     counts = count_labels(gt_class, gt_instance, pred_class, pred_instance, num_classes=num_classes)
     return score_counts(counts, iou_threshold=iou_threshold)
+
+
+#: Where :func:`loss_buckets` puts a ground-truth element, in the order it tries them.
+LOSS_BUCKETS: tuple[str, ...] = ("found", "tiny", "wrong class", "leaves, not grouped", "coarse fragments",
+                                 "not cut out")
+
+
+def _best_overlap(keys: npt.NDArray[np.int64], member: npt.NDArray[np.bool_],
+                  size_of: Mapping[int, int]) -> tuple[float, int]:
+    """Best IoU of the ``member`` points with any group of ``keys`` (key 0 is no group)."""
+    k, n = np.unique(keys[member], return_counts=True)
+    m = int(member.sum())
+    best, arg = 0.0, 0
+    for key, inter in zip(k.tolist(), n.tolist(), strict=True):
+        if key:
+            iou = inter / (m + size_of[key] - inter)
+            if iou > best:
+                best, arg = iou, int(key)
+    return best, arg
+
+
+def loss_buckets(
+    gt_class: npt.ArrayLike, gt_instance: npt.ArrayLike, pred_class: npt.ArrayLike,
+    pred_instance: npt.ArrayLike, coarse: npt.ArrayLike, leaf: npt.ArrayLike, *,
+    classes: tuple[int, ...], tiny: int = 100, iou_threshold: float = 0.5,
+) -> list[dict[str, Any]]:
+    """Where each ground-truth element of ``classes`` was lost, if it was.
+
+    Each element goes to the first of :data:`LOSS_BUCKETS` that holds:
+
+    ``found``
+        a predicted instance of its class covers it (IoU >= ``iou_threshold``);
+    ``tiny``
+        it has fewer than ``tiny`` points;
+    ``wrong class``
+        a predicted instance or a tree leaf of any class covers it: the pieces were cut
+        right, the class (or an ancestor's class the leaf inherited) was wrong;
+    ``leaves, not grouped``
+        leaves lying mostly (over half their points) inside it cover half of it: it was
+        cut out in pieces that were never joined;
+    ``coarse fragments``
+        no coarse segment holds half of its points;
+    ``not cut out``
+        one coarse segment holds most of it, and nothing separated it from the rest.
+
+    Parameters
+    ----------
+    gt_class, gt_instance : array-like of int, shape (n_points,)
+        Ground truth; instance 0 is no instance.
+    pred_class, pred_instance : array-like of int, shape (n_points,)
+        The run's labels (instance ids are per class space; 0 is none).
+    coarse, leaf : array-like of int, shape (n_points,)
+        The coarse segment (0: none) and a key unique per tree leaf (0: none).
+    classes : tuple of int
+        The element classes to look at.
+
+    Returns
+    -------
+    list of dict
+        One per element: ``class``, ``instance``, ``points``, ``bucket``, the best IoU
+        with an instance of its class, of any class and with a leaf, the predicted class
+        of the best instance (or of most of its points), the share of it in its main
+        coarse segment and its share of that segment.
+
+    Examples
+    --------
+    >>> gc = np.r_[np.full(4, 4), np.full(6, 2)]; gi = np.r_[np.ones(4, int), np.zeros(6, int)]
+    >>> [r["bucket"] for r in loss_buckets(gc, gi, gc, gi, np.ones(10), np.ones(10), classes=(4,), tiny=1)]
+    ['found']
+    >>> [r["bucket"] for r in loss_buckets(gc, gi, np.full(10, 2), np.zeros(10), np.ones(10), np.ones(10),
+    ...                                    classes=(4,), tiny=1)]
+    ['not cut out']
+    """
+    gcls, ginst = np.asarray(gt_class, np.int64), np.asarray(gt_instance, np.int64)
+    pcls, pinst = np.asarray(pred_class, np.int64), np.asarray(pred_instance, np.int64)
+    seg, lf = np.asarray(coarse, np.int64), np.asarray(leaf, np.int64)
+    pkey = np.where(pinst > 0, pinst * 256 + pcls, 0)
+
+    def sizes(keys: npt.NDArray[np.int64]) -> dict[int, int]:
+        k, c = np.unique(keys, return_counts=True)
+        return dict(zip(k.tolist(), c.tolist(), strict=True))
+
+    s_pkey, s_leaf, s_seg = sizes(pkey), sizes(lf), sizes(seg)
+    out: list[dict[str, Any]] = []
+    for c in classes:
+        for e in np.unique(ginst[(gcls == c) & (ginst > 0)]).tolist():
+            member = (gcls == c) & (ginst == e)
+            m = int(member.sum())
+            iou_same, _ = _best_overlap(np.where(pcls == c, pkey, 0), member, s_pkey)
+            iou_any, key_any = _best_overlap(pkey, member, s_pkey)
+            iou_leaf, _ = _best_overlap(lf, member, s_leaf)
+            sk, sn = np.unique(seg[member], return_counts=True)
+            main, share = int(sk[np.argmax(sn)]), float(sn.max() / m)
+            lk, ln = np.unique(lf[member], return_counts=True)
+            inside = sum(x for k, x in zip(lk.tolist(), ln.tolist(), strict=True) if k and x > 0.5 * s_leaf[k])
+            if iou_same >= iou_threshold:
+                bucket = "found"
+            elif m < tiny:
+                bucket = "tiny"
+            elif max(iou_any, iou_leaf) >= iou_threshold:
+                bucket = "wrong class"
+            elif inside >= 0.5 * m:
+                bucket = "leaves, not grouped"
+            elif share < 0.5 or main == 0:
+                bucket = "coarse fragments"
+            else:
+                bucket = "not cut out"
+            got = key_any % 256 if key_any else int(np.bincount(pcls[member]).argmax())
+            out.append({"class": int(c), "instance": int(e), "points": m, "bucket": bucket,
+                        "iou_same": round(iou_same, 3), "iou_any": round(iou_any, 3), "iou_leaf": round(iou_leaf, 3),
+                        "predicted": int(got), "coarse_share": round(share, 3),
+                        "share_of_segment": round(float(sn.max()) / s_seg[main], 3) if main else 0.0})
+    return out

@@ -316,3 +316,41 @@ def test_unknown_input_is_one_line_exit_2(tmp_path):
     assert proc.returncode == 2
     assert len(proc.stderr.strip().splitlines()) == 1
     assert "wazir_kahn" in proc.stderr
+
+
+def test_loss_buckets_names_where_each_element_was_lost():
+    from scenes.metrics import loss_buckets
+
+    # Six dome elements (class 5) of 10 points each and 40 wall points (class 2), then
+    # labels that lose each dome in a different way.
+    n_el = 10
+    gc = np.r_[np.full(6 * n_el, 5), np.full(40, 2)]
+    gi = np.r_[np.repeat(np.arange(1, 7), n_el), np.zeros(40, int)]
+    pc, pi = np.full(len(gc), 2), np.zeros(len(gc), int)
+    coarse, leaf = np.zeros(len(gc), int), np.zeros(len(gc), int)
+    el = [np.arange(k * n_el, (k + 1) * n_el) for k in range(6)]
+    wall = np.arange(6 * n_el, len(gc))
+    # 1: found (its own segment, leaf and dome instance)
+    coarse[el[0]], leaf[el[0]], pc[el[0]], pi[el[0]] = 1, 1, 5, 1
+    # 2: cut out (its own leaf and instance) but called minaret
+    coarse[el[1]], leaf[el[1]], pc[el[1]], pi[el[1]] = 2, 2, 6, 1
+    # 3: cut into three leaves that lie inside it, never joined
+    coarse[el[2]] = 3
+    leaf[el[2][:3]], leaf[el[2][3:6]], leaf[el[2][6:]] = 3, 4, 5
+    # 4: spread over five coarse segments, each shared with wall points
+    for j, part in enumerate(np.array_split(el[3], 5)):
+        coarse[part] = 10 + j
+        coarse[wall[4 * j:4 * j + 4]] = 10 + j
+        leaf[part] = leaf[wall[4 * j:4 * j + 4]] = 10 + j
+    # 5: one segment with all the wall's other points, never split
+    coarse[el[4]] = coarse[wall[20:]] = 20
+    leaf[el[4]] = leaf[wall[20:]] = 20
+    # 6: found, but with --tiny above its size it is still "found" (found comes first)
+    coarse[el[5]], leaf[el[5]], pc[el[5]], pi[el[5]] = 6, 6, 5, 2
+    rows = loss_buckets(gc, gi, pc, pi, coarse, leaf, classes=(5,), tiny=5)
+    assert [r["bucket"] for r in rows] == ["found", "wrong class", "leaves, not grouped", "coarse fragments",
+                                           "not cut out", "found"]
+    assert rows[1]["predicted"] == 6
+    assert rows[4]["share_of_segment"] == round(10 / 30, 3)
+    tiny = loss_buckets(gc, gi, pc, pi, coarse, leaf, classes=(5,), tiny=11)
+    assert [r["bucket"] for r in tiny] == ["found", "tiny", "tiny", "tiny", "tiny", "found"]
