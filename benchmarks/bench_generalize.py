@@ -40,6 +40,7 @@ if str(REPO) not in sys.path:
 import numpy as np  # noqa: E402
 
 from pipeline.evaluate import evaluate_inputs  # noqa: E402
+from pipeline.tree_stage import TREE_ALGORITHM  # noqa: E402
 from scenes.procedural import FAMILIES, family_of, scan_draw, split_seeds  # noqa: E402
 from scenes.synth import synth  # noqa: E402
 from tiling.classes import ELEMENT_CLASSES, ClassId  # noqa: E402
@@ -163,6 +164,7 @@ def main(argv: list[str] | None = None) -> int:
     out.write_text(json.dumps({"benchmark": "bench_generalize", "split": args.split, "family": args.family,
                                "overrides": args.overrides,
                                "seeds": seeds, "points": list(args.points), "workflow": "workflows/local.yaml",
+                               "tree_algorithm": TREE_ALGORITHM,
                                "totals": total, "families": fam, "visibility": visibility, "sites": sites,
                                "seconds": round(wall, 1)},
                               indent=1) + "\n")
