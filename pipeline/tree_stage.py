@@ -318,24 +318,22 @@ def _group_tree(pts: np.ndarray, s: int, params: TreeStageParams, clf: Any, grou
 
 def _same_footprint(parts: list[np.ndarray]) -> list[list[int]]:
     """``parts`` (point arrays) joined where their x-y boxes overlap: the pieces of one
-    column (its faces, its shaft and capital) share its footprint; two columns do not."""
-    box = np.array([[*p[:, :2].min(axis=0), *p[:, :2].max(axis=0)] for p in parts])
-    label = list(range(len(parts)))
+    column (its faces, its shaft and capital) share its footprint; two columns do not.
 
-    def root(i: int) -> int:
-        while label[i] != i:
-            i = label[i]
-        return i
+    >>> a = np.array([[0.0, 0, 0], [1, 1, 1]])
+    >>> _same_footprint([a, a + [0.5, 0.5, 2], a + [5, 0, 0]])
+    [[0, 1], [2]]
+    """
+    from primitives.stitch import UnionFind
 
-    for i in range(len(parts)):
-        for j in range(i + 1, len(parts)):
-            if (box[i, 0] <= box[j, 2] and box[j, 0] <= box[i, 2] and box[i, 1] <= box[j, 3]
-                    and box[j, 1] <= box[i, 3]):
-                label[root(j)] = root(i)
-    groups: dict[int, list[int]] = {}
-    for i in range(len(parts)):
-        groups.setdefault(root(i), []).append(i)
-    return list(groups.values())
+    lo = np.array([p[:, :2].min(axis=0) for p in parts])
+    hi = np.array([p[:, :2].max(axis=0) for p in parts])
+    i, j = np.triu_indices(len(parts), k=1)
+    touch = np.all((lo[i] <= hi[j]) & (lo[j] <= hi[i]), axis=1)
+    uf = UnionFind(len(parts))
+    uf.union_pairs(i[touch], j[touch])
+    label = uf.labels()
+    return [np.flatnonzero(label == k).tolist() for k in range(int(label.max()) + 1)]
 
 
 def _root_class(pts: np.ndarray, params: TreeStageParams, clf: Any, ground_level: float | None) -> int:
