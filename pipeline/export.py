@@ -18,7 +18,6 @@ never leaves a half file under the requested name.
 
 from __future__ import annotations
 
-import logging
 import os
 import shutil
 from collections.abc import Iterator
@@ -30,10 +29,8 @@ import numpy as np
 
 from tiling.classes import CLASS_NAMES, NUM_CLASSES, ClassId
 from tiling.errors import ConfigError, PipelineError
-from tiling.readers import read_blocks
+from tiling.readers import las_crs, read_blocks
 from tiling.store import RunStore
-
-logger = logging.getLogger(__name__)
 
 __all__ = ["LAS_CLASSIFICATION", "CLASS_COLOURS", "export_las", "export_parquet", "export_png", "write_outputs"]
 
@@ -67,16 +64,6 @@ def _require_labels(store: RunStore) -> None:
         raise PipelineError(f"store {store.url} has no complete labels; run `hollowtree run` first")
 
 
-def _source_crs(header: laspy.LasHeader, path: str) -> Any:
-    """The input's CRS, or None (with a warning) when its CRS VLR is empty or broken: the
-    labelled copy then has no CRS, as ingest recorded (``crs_wkt`` None)."""
-    try:
-        return header.parse_crs()
-    except Exception as e:  # pyproj's CRSError, laspy's errors: a broken VLR is not a reason to stop  # noqa: BLE001
-        logger.warning("%s: CRS VLR could not be parsed (%s); the labelled copy has no CRS", path, e)
-        return None
-
-
 def _out_header(sources: list[dict[str, Any]]) -> laspy.LasHeader:
     first = next((s for s in sources if s.get("format") in ("las", "laz", "copc")), None)
     if first is not None:
@@ -87,7 +74,7 @@ def _out_header(sources: list[dict[str, Any]]) -> laspy.LasHeader:
         header.scales, header.offsets = src.scales, src.offsets
         for dim in src.point_format.extra_dimensions:
             header.add_extra_dim(laspy.ExtraBytesParams(name=dim.name, type=dim.dtype))
-        crs = _source_crs(src, first["path"])
+        crs = las_crs(src, first["path"])
         if crs is not None:
             header.add_crs(crs)
     else:

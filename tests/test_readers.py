@@ -604,4 +604,5 @@ def test_an_empty_crs_vlr_is_no_crs_in_ingest_and_export(tmp_path, source, caplo
     with caplog.at_level("WARNING"):
         header = _out_header([info.to_dict()])
     assert header.parse_crs() is None
-    assert any("CRS VLR could not be parsed" in r.getMessage() for r in caplog.records)
+    assert any("CRS VLR could not be parsed" in r.getMessage() and str(path) in r.getMessage()
+               for r in caplog.records)

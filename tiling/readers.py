@@ -55,7 +55,7 @@ from tiling.errors import (
     UnsupportedInputError,
 )
 
-__all__ = ["SourceInfo", "PointBlock", "probe", "read_blocks", "SUFFIXES"]
+__all__ = ["SourceInfo", "PointBlock", "las_crs", "probe", "read_blocks", "SUFFIXES"]
 
 logger = logging.getLogger(__name__)
 
@@ -324,16 +324,23 @@ def _las_header_checks(p: Path, h: laspy.LasHeader) -> None:
                                     f"({need} bytes) but the file has {size} bytes")
 
 
+def las_crs(header: laspy.LasHeader, path: str | Path) -> Any:
+    """The CRS of a LAS header (a ``pyproj.CRS``), or None when it has none, or (with a
+    warning naming ``path``) when its CRS VLR is empty or broken, as in a WKT VLR that
+    holds ``''``: a scan without a readable CRS is still a scan."""
+    try:
+        return header.parse_crs()
+    except Exception as e:  # pyproj's CRSError, laspy's errors: a broken VLR is not a reason to stop  # noqa: BLE001
+        logger.warning("%s: CRS VLR could not be parsed (%s); taken as no CRS", path, e)
+        return None
+
+
 def _probe_las(p: Path) -> SourceInfo:
     with _errors(p, "corrupt LAS/LAZ header", *_LAS_ERRORS), laspy.open(p) as r:
         h = r.header
         _las_header_checks(p, h)
-        crs = None
-        try:
-            parsed = h.parse_crs()
-            crs = None if parsed is None else parsed.to_wkt()
-        except Exception as e:  # a broken CRS VLR should not stop ingest  # noqa: BLE001
-            logger.warning("%s: CRS VLR could not be parsed (%s); crs_wkt=None", p, e)
+        parsed = las_crs(h, p)
+        crs = None if parsed is None else parsed.to_wkt()
         names = set(h.point_format.dimension_names)
         return SourceInfo(
             path=str(p), format="laz" if h.are_points_compressed else "las",
