@@ -72,8 +72,10 @@ DECISIONS = ("split-model", "energy")
 #: end bays lose their end wall; tree/samples, tree/rows/cells), and MERGE_INTO_OVERLAP 0.5;
 #: tree-v16: frames (tree/frames.py: a portal's face joins its passage, a lone bay's
 #: intrados takes its piers and the opening beside them is a bay; wall instances sampled too);
-#: tree-v17: a group called dome or pillar gives up the segments called pillar (PEEL_FROM).
-TREE_ALGORITHM = "tree-v17"
+#: tree-v17: a group called dome or pillar gave up the segments called pillar;
+#: tree-v18: instead, a root called dome or pillar that nothing splits gives up its posts
+#: HollowNet calls pillars (tree.sequences.posts, tree.build.POSTS_FROM).
+TREE_ALGORITHM = "tree-v18"
 #: Points sampled from each wall instance for the frames (tree/frames.py): a pier's face
 #: beside a bay's jamb is a strip a few tenths of a metre wide in a facade's wall.
 WALL_SAMPLE_POINTS = 16384
@@ -219,13 +221,6 @@ def _load_classifier(weights: str | None) -> None:
     Classifier.get(weights, num_threads=_worker_threads())
 
 
-#: Element groups HollowNet calls one of these give up the segments it calls pillars
-#: (:func:`tree_batch`): a pavilion's columns, which touch its slab, are their own trees
-#: (the pieces of one column, whose x-y boxes overlap, one tree), the rest of the group one
-#: tree. Clutter (``other``) keeps its pieces: a tree's trunk or a scaffold's poles are
-#: clutter. Chosen on the validation split (docs/generalize.md).
-PEEL_FROM = (int(ClassId.DOME), int(ClassId.PILLAR))
-_PILLAR = int(ClassId.PILLAR)
 _PLANAR = np.array([int(c) for c in PLANAR_CLASSES], dtype=np.uint8)
 _NODE_COLUMNS = ("segment", "node_id", "parent", "depth", "sequence", "e1", "e2", "e3", "e4", "e5", "xi",
                  "class_id", "score", "n_points", "xmin", "ymin", "zmin", "xmax", "ymax", "zmax",
@@ -316,63 +311,6 @@ def _group_tree(pts: np.ndarray, s: int, params: TreeStageParams, clf: Any, grou
     return values, cols, n_inst
 
 
-def _same_footprint(parts: list[np.ndarray]) -> list[list[int]]:
-    """``parts`` (point arrays) joined where their x-y boxes overlap: the pieces of one
-    column (its faces, its shaft and capital) share its footprint; two columns do not.
-
-    >>> a = np.array([[0.0, 0, 0], [1, 1, 1]])
-    >>> _same_footprint([a, a + [0.5, 0.5, 2], a + [5, 0, 0]])
-    [[0, 1], [2]]
-    """
-    from primitives.stitch import UnionFind
-
-    lo = np.array([p[:, :2].min(axis=0) for p in parts])
-    hi = np.array([p[:, :2].max(axis=0) for p in parts])
-    i, j = np.triu_indices(len(parts), k=1)
-    touch = np.all((lo[i] <= hi[j]) & (lo[j] <= hi[i]), axis=1)
-    uf = UnionFind(len(parts))
-    uf.union_pairs(i[touch], j[touch])
-    label = uf.labels()
-    return [np.flatnonzero(label == k).tolist() for k in range(int(label.max()) + 1)]
-
-
-def _root_class(pts: np.ndarray, params: TreeStageParams, clf: Any, ground_level: float | None) -> int:
-    """HollowNet's class of ``pts`` as one part, with the size rules of :func:`_group_tree`."""
-    center = pts.mean(axis=0)
-    ruled = size_rules(clf, pillar_max_height=params.pillar_max_height, other_max_base=params.other_max_base,
-                       other_max_size=params.other_max_size,
-                       ground=None if ground_level is None else ground_level - center[2])
-    cls, _, _ = ruled.predict([pts - center])
-    return int(np.asarray(cls).reshape(-1)[0])
-
-
-def _group_parts(xyz: np.ndarray, offsets: np.ndarray, lo: int, s: int, s_end: int, params: TreeStageParams,
-                 clf: Any, ground_level: Any) -> list[tuple[np.ndarray | slice, int, float | None]]:
-    """The trees to build for the element group of segments ``s .. s_end - 1`` (0-based):
-    ``(rows of xyz, first segment, ground level)`` each. One tree for the group (its rows a
-    slice, no copy), unless it has several segments and HollowNet calls it one of
-    :data:`PEEL_FROM`: then the segments it calls pillar are their own trees (one per
-    column, its pieces joined by :func:`_same_footprint`) and the rest of the group is one
-    tree (a pavilion's columns beside its dome and slab)."""
-    a, z = int(offsets[s]) - lo, int(offsets[s_end]) - lo
-    whole: list[tuple[np.ndarray | slice, int, float | None]] = [(slice(a, z), s, ground_level(s, s_end))]
-    if s_end - s < 2 or _root_class(xyz[a:z], params, clf, whole[0][2]) not in PEEL_FROM:
-        return whole
-    own = [(np.arange(int(offsets[t]) - lo, int(offsets[t + 1]) - lo), t) for t in range(s, s_end)]
-    pillar = [_root_class(xyz[r], params, clf, ground_level(t, t + 1)) == _PILLAR for r, t in own]
-    if not any(pillar) or all(pillar):
-        return whole
-    columns = [o for o, p in zip(own, pillar, strict=True) if p]
-    rest = [o for o, p in zip(own, pillar, strict=True) if not p]
-    parts: list[tuple[np.ndarray | slice, int, float | None]] = []
-    for j in _same_footprint([xyz[r] for r, _ in columns]):
-        levels = [ground_level(columns[i][1], columns[i][1] + 1) for i in j]
-        parts.append((np.concatenate([columns[i][0] for i in j]), columns[j[0]][1],
-                      None if levels[0] is None else min(levels)))
-    parts.append((np.concatenate([r for r, _ in rest]), rest[0][1], ground_level(s, s_end)))
-    return parts
-
-
 def _sampled_group_tree(store: RunStore, b: int, lo: int, hi: int, s: int, scale: np.ndarray,
                         params: TreeStageParams, clf: Any, ground_level: float | None) -> tuple[dict[str, list[Any]], int]:
     """The tree of one element group above ``max_group_points``, in bounded memory: built
@@ -435,8 +373,7 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
     ``ground``: the local ground level of each of these segments, in the store's
     coordinates (``tree.ground.ground_levels``); used when ``roof_min_height`` or ``other_max_base`` is set
     (a group takes its segments' lowest). A batch of one group above ``max_group_points``
-    is built on a sample of it (:func:`_sampled_group_tree`); any other group may give up
-    its columns (:func:`_group_parts`).
+    is built on a sample of it (:func:`_sampled_group_tree`).
     """
     from hollownet.predict import Classifier
 
@@ -464,12 +401,12 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
         cols = {c: [] for c in _NODE_COLUMNS}
         n_inst = 0
         for s, s_end in zip(bounds[:-1], bounds[1:], strict=True):
-            for r, t, g in _group_parts(xyz, offsets, lo, s, s_end, params, clf, ground_level):
-                values, group_cols, n_inst = _group_tree(xyz[r], t, params, clf, g, n_inst)
-                for k, v in values.items():
-                    out[k][r] = v
-                for c in _NODE_COLUMNS:
-                    cols[c] += group_cols[c]
+            a, z = int(offsets[s]) - lo, int(offsets[s_end]) - lo
+            values, group_cols, n_inst = _group_tree(xyz[a:z], s, params, clf, ground_level(s, s_end), n_inst)
+            for k, v in values.items():
+                out[k][a:z] = v
+            for c in _NODE_COLUMNS:
+                cols[c] += group_cols[c]
         store.write_unit(f"tree/batches/{b}", out)
         _write_samples(store, b, xyz, out, params.seed, segs[0])
     _write_table(store, f"tree/tables/{b}.parquet", pa.table(cols))

@@ -1,9 +1,9 @@
 """A compound element in one element group: a pavilion gives up its columns.
 
 The coarse stage joins a pavilion's dome, slab and columns into one element group
-(they touch), which HollowNet calls dome; the tree stage builds the segments it calls
-pillar as their own trees (``pipeline.tree_stage.PEEL_FROM``), so each column is a
-pillar instance. Without that step the columns are part of the dome.
+(they touch), which HollowNet calls dome and no proposal splits; the tree cuts out its
+posts HollowNet calls pillars (``tree.sequences.posts``, ``tree.build.POSTS_FROM``), so
+each column is a pillar instance. Without that step the columns are part of the dome.
 """
 
 from __future__ import annotations
@@ -51,11 +51,11 @@ def _pillars_found(tmp_path, scan) -> tuple[int, int]:
 
 
 def test_a_pavilion_gives_up_its_columns(tmp_path, pavilion, monkeypatch):
-    import pipeline.tree_stage as ts
+    import tree.build
 
-    found, n_gt = _pillars_found(tmp_path / "peel", pavilion)
+    found, n_gt = _pillars_found(tmp_path / "posts", pavilion)
     assert n_gt >= 4
-    monkeypatch.setattr(ts, "PEEL_FROM", ())
+    monkeypatch.setattr(tree.build, "POSTS_FROM", ())
     found_whole, _ = _pillars_found(tmp_path / "whole", pavilion)
     assert found >= n_gt // 2
     assert found > found_whole

@@ -501,3 +501,106 @@ def test_the_tree_stage_passes_look_ahead_from_the_workflow(monkeypatch):
                 _Always(int(ClassId.WALL)), None, 0)
     _group_tree(xyz, 0, TreeStageParams(max_depth=0, roof_min_height=None), _Always(int(ClassId.WALL)), None, 0)
     assert seen == [False, True]
+
+
+def _posts_under_a_slab(rng, n_posts=4, floor=True):
+    """A pavilion's frame: ``n_posts`` round posts (r 0.15 m, 3 m tall) on a ring 3 m
+    across, a slab (4 x 4 x 0.3 m) on them, a dome-like cap on the slab and, if
+    ``floor``, a platform under them. Returns the points and each point's part
+    (1..n_posts a post, 0 anything else)."""
+    pieces, part = [], []
+    for k in range(n_posts):
+        a = 2 * np.pi * k / n_posts
+        t, z = rng.uniform(0, 2 * np.pi, 1500), rng.uniform(0.0, 3.0, 1500)
+        pieces.append(np.c_[1.5 * np.cos(a) + 0.15 * np.cos(t), 1.5 * np.sin(a) + 0.15 * np.sin(t), z])
+        part.append(np.full(1500, k + 1))
+    pieces.append(rng.uniform(0, 1, (4000, 3)) * [4.0, 4.0, 0.3] + [-2.0, -2.0, 3.0])
+    v = rng.normal(size=(3000, 3))
+    v[:, 2] = np.abs(v[:, 2])
+    pieces.append(1.5 * v / np.linalg.norm(v, axis=1, keepdims=True) + [0, 0, 3.3])  # a hemisphere
+    part += [np.zeros(4000), np.zeros(3000)]
+    if floor:
+        pieces.append(rng.uniform(0, 1, (3000, 3)) * [5.0, 5.0, 0.05] + [-2.5, -2.5, -0.05])
+        part.append(np.zeros(3000))
+    return np.vstack(pieces), np.concatenate(part).astype(np.int64)
+
+
+class _SlenderPillarElseDome:
+    """Calls a part at least twice as tall as it is wide ``slender`` (pillar), any other
+    ``other``: the posts of :func:`_posts_under_a_slab` pillars, the whole a dome."""
+
+    def __init__(self, slender=int(ClassId.PILLAR), other=int(ClassId.DOME)):
+        self.slender, self.other = slender, other
+
+    def predict(self, segments):
+        tall = np.array([np.ptp(s[:, 2]) >= 2 * np.ptp(s[:, :2], axis=0).max() for s in segments])
+        cls = np.where(tall, self.slender, self.other)
+        prob = np.zeros((len(segments), NUM_CLASSES - 1))
+        prob[np.arange(len(segments)), cls - 1] = 1.0
+        return cls, np.ones(len(segments)), prob
+
+
+@pytest.mark.parametrize("floor", [True, False])
+def test_posts_are_found_under_their_slab(floor):
+    """Each post under the slab (on a platform or not) is one post, holding its own
+    points; a slab, a ring of posts that touch and a solid block have none."""
+    from tree.sequences import SequenceParams, posts
+
+    xyz, part = _posts_under_a_slab(np.random.default_rng(0), floor=floor)
+    found = posts(xyz)
+    assert found is not None
+    assert len(found) == 4
+    for c in found:
+        own = np.bincount(part[c], minlength=5)
+        assert own[1:].max() >= 0.95 * len(c)  # one post's points
+        assert own[1:].max() >= 0.8 * np.sum(part == np.argmax(own[1:]) + 1)  # most of them
+    assert posts(xyz[part == 0]) is None  # slab, cap and floor alone
+    assert posts(xyz, params=SequenceParams(part_gap=0.0)) is None
+    rng = np.random.default_rng(1)
+    assert posts(rng.uniform(0, 1, (20000, 3)) * [6.0, 1.0, 5.0]) is None  # a solid block
+    wide = _posts_under_a_slab(rng)[0] * [1.0, 1.0, 0.2]  # posts 0.6 m tall: too short
+    assert posts(wide) is None
+    tubes = _posts_under_a_slab(rng)[0] * [0.3, 0.3, 1.0]  # posts 0.09 m across: a scaffold's
+    assert posts(tubes) is None
+
+
+def test_the_shafts_of_a_clustered_pillar_are_one_post():
+    """Four shafts (0.5 m across, 0.14 m apart: touching at the posts' cells), two such
+    pillars 3 m apart under a beam: two posts, each holding its four shafts."""
+    from tree.sequences import posts
+
+    rng = np.random.default_rng(3)
+    pieces = []
+    for x0 in (0.0, 3.0):
+        for dx, dy in ((0.45, 0), (-0.45, 0), (0, 0.45), (0, -0.45)):
+            t, z = rng.uniform(0, 2 * np.pi, 600), rng.uniform(0.0, 4.0, 600)
+            pieces.append(np.c_[x0 + dx + 0.25 * np.cos(t), dy + 0.25 * np.sin(t), z])
+    pieces.append(rng.uniform(0, 1, (3000, 3)) * [6.0, 2.0, 0.4] + [-1.5, -1.0, 4.0])
+    found = posts(np.vstack(pieces))
+    assert found is not None
+    assert [len(c) >= 4 * 550 for c in found] == [True, True]
+    assert all(np.ptp(np.vstack(pieces)[c, 0]) < 2.0 for c in found)
+
+
+def test_a_root_called_dome_gives_up_the_posts_called_pillar():
+    """The posts of a frame HollowNet calls dome are pillar instances, the slab and the
+    cap one more child; posts called something else, or a root called wall or arch
+    (an arcade's piers) or other (a scaffold's poles), stay whole."""
+    from tree.sequences import POST_SEQUENCE
+
+    xyz, part = _posts_under_a_slab(np.random.default_rng(2))
+    r = build_tree(xyz, _SlenderPillarElseDome(), rng=0, split=_Never())
+    kids = r.nodes.children(0)
+    assert r.nodes.sequence[kids].tolist() == [POST_SEQUENCE] * 5
+    own = []
+    for k in range(1, 5):  # most of each post (not the slice in the platform) its own pillar
+        inst, count = np.unique(r.instance[part == k], return_counts=True)
+        own.append(int(inst[count.argmax()]))
+        assert own[-1] > 0
+        assert count.max() >= 0.8 * np.sum(part == k)
+        assert (r.class_id[r.instance == own[-1]] == int(ClassId.PILLAR)).all()
+    assert len(set(own)) == 4
+    for whole, posts_as in ((ClassId.DOME, ClassId.OTHER), (ClassId.WALL, ClassId.PILLAR),
+                            (ClassId.ARCH, ClassId.PILLAR), (ClassId.OTHER, ClassId.PILLAR)):
+        r2 = build_tree(xyz, _SlenderPillarElseDome(int(posts_as), int(whole)), rng=0, split=_Never())
+        assert len(r2.nodes) == 1

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from scipy.spatial import cKDTree
 
 from tiling.classes import ELEMENT_CLASSES, ClassId
 from tiling.columns import column_max, column_min, column_span
@@ -30,10 +31,12 @@ from tree.operators import RngLike, h
 from tree.sequences import (
     GAP_SEQUENCE,
     PART_SEQUENCE,
+    POST_SEQUENCE,
     Proposal,
     SequenceParams,
     gaps,
     parts,
+    posts,
     propose,
 )
 from tree.split import N_PROBS, SplitModel, split_features
@@ -60,6 +63,14 @@ PART_MIN_HEIGHT = 2.0
 #: a standalone element itself, and clutter (``other``) in pieces is clutter. On Wazir Khan
 #: such roots were rows of arcade bays seen in pieces (docs/method.md, tree-v13).
 WHOLE_ROOT_CLASSES = (int(ClassId.DOME), int(ClassId.MINARET), int(ClassId.OTHER))
+
+#: A root HollowNet calls one of these that no proposal splits gives up its posts
+#: (:func:`tree.sequences.posts`) when HollowNet calls at least two of them pillars: a
+#: pavilion's or a colonnade's columns under their slab or beam, which touch through it.
+#: Clutter keeps its posts (a scaffold's poles, people side by side), as it keeps its
+#: parts (:data:`WHOLE_ROOT_CLASSES`). Chosen on the validation split (docs/generalize.md).
+POSTS_FROM = (int(ClassId.DOME), int(ClassId.PILLAR))
+_PILLAR = int(ClassId.PILLAR)
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
@@ -353,6 +364,30 @@ def build_tree(
     def _best(scored: list[tuple[float, int, Any]]) -> tuple[float, int, Any]:
         return scored[int(np.argmax([x for x, _, _ in scored]))]  # the first of equal scores, as before
 
+    def _split_posts(node: int, idx: IntArray, pts: FloatArray) -> bool:
+        """A root of :data:`POSTS_FROM` that nothing split: the posts HollowNet calls
+        pillars each a child (:func:`tree.sequences.posts`), the rest of the root one."""
+        if depth[node] != 0 or cls[node] not in POSTS_FROM:
+            return False
+        found = posts(pts, params=params)
+        if found is None:
+            return False
+        p_cls, _, _ = _classify(classifier, [pts[c] for c in found])
+        children = [c for c, k in zip(found, p_cls, strict=True) if k == _PILLAR]
+        if len(children) < 2:
+            return False
+        part = np.full(len(pts), len(children), dtype=np.int64)
+        for j, c in enumerate(children):
+            part[c] = j
+        rest = part == len(children)
+        if 0 < rest.sum() < max(params.min_points, 2):  # a few points: with the nearest post
+            _, near = cKDTree(pts[~rest]).query(pts[rest])
+            part[rest] = part[~rest][near]
+        children = [np.flatnonzero(part == j).astype(np.int64) for j in range(int(part.max()) + 1)]
+        c_cls, c_sc, c_pr = _classify(classifier, [pts[c] for c in children])
+        _add_children(node, idx, children, POST_SEQUENCE, np.full(5, np.nan), np.nan, c_cls, c_sc, c_pr)
+        return True
+
     def _split_parts(node: int, idx: IntArray, pts: FloatArray) -> None:
         """A root that nothing split: into its parts apart (:func:`tree.sequences.parts`)
         when HollowNet calls them different classes, one of them of :data:`PART_CLASSES`
@@ -383,7 +418,8 @@ def build_tree(
         node_rng = np.random.default_rng(np.random.SeedSequence([base, node]))
         scored = _scored(pts, depth[node], cls[node], probs[node], node_rng)
         if not scored:
-            _split_parts(node, idx, pts)
+            if not _split_posts(node, idx, pts):
+                _split_parts(node, idx, pts)
             continue
         x, key, (pr, e, c_cls, c_sc, c_pr) = _best(scored)
         keep = x >= thr_split
@@ -403,7 +439,8 @@ def build_tree(
                     x, key, (pr, e, c_cls, c_sc, c_pr) = storey[0]
                     break
         if not keep:
-            _split_parts(node, idx, pts)
+            if not _split_posts(node, idx, pts):
+                _split_parts(node, idx, pts)
             continue
         children = pr.children
         if pr.kept_children is not None:  # the storeys' bands, each a child (tree/sequences.py)
@@ -437,7 +474,8 @@ def _per_point(nodes: NodeTable, leaf_of: IntArray) -> TreeResult:
             same[par] += int(nodes.n_points[i])
     element &= nodes.is_leaf | (2 * same >= nodes.n_points)
     # Parts cut at gaps or apart do not touch: they are different things whatever their classes.
-    gap_parent = nodes.parent[np.isin(nodes.sequence, (GAP_SEQUENCE, PART_SEQUENCE)) & (nodes.parent >= 0)]
+    gap_parent = nodes.parent[np.isin(nodes.sequence, (GAP_SEQUENCE, PART_SEQUENCE, POST_SEQUENCE))
+                              & (nodes.parent >= 0)]
     element[gap_parent] = False
     inst_nodes: list[int] = []
     for i in range(m):  # parents come before children (creation order)
