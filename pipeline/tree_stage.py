@@ -74,8 +74,9 @@ DECISIONS = ("split-model", "energy")
 #: intrados takes its piers and the opening beside them is a bay; wall instances sampled too);
 #: tree-v17: a group called dome or pillar gave up the segments called pillar;
 #: tree-v18: instead, a root called dome or pillar that nothing splits gives up its posts
-#: HollowNet calls pillars (tree.sequences.posts, tree.build.POSTS_FROM).
-TREE_ALGORITHM = "tree-v18"
+#: HollowNet calls pillars (tree.sequences.posts, tree.build.POSTS_FROM);
+#: tree-v19: the posts come from the slice that gives the most (tree.sequences.POST_TRIES).
+TREE_ALGORITHM = "tree-v19"
 #: Points sampled from each wall instance for the frames (tree/frames.py): a pier's face
 #: beside a bay's jamb is a strip a few tenths of a metre wide in a facade's wall.
 WALL_SAMPLE_POINTS = 16384

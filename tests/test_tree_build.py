@@ -564,6 +564,21 @@ def test_posts_are_found_under_their_slab(floor):
     assert posts(tubes) is None
 
 
+def test_posts_are_found_above_a_slice_of_more_pieces():
+    """Thirty tufts of grass around the platform make its slice the one with the most
+    pieces; the posts still come from the slice that gives the most posts."""
+    from tree.sequences import posts
+
+    rng = np.random.default_rng(4)
+    xyz, part = _posts_under_a_slab(rng)
+    angle = np.linspace(0, 2 * np.pi, 30, endpoint=False)
+    tufts = np.vstack([rng.uniform(-0.05, 0.05, (40, 3)) + [3.5 * np.cos(t), 3.5 * np.sin(t), 0.0] for t in angle])
+    found = posts(np.r_[xyz, tufts])
+    assert found is not None
+    assert len(found) == 4
+    assert all((part[c[c < len(part)]] > 0).mean() > 0.95 for c in found)
+
+
 def test_the_shafts_of_a_clustered_pillar_are_one_post():
     """Four shafts (0.5 m across, 0.14 m apart: touching at the posts' cells), two such
     pillars 3 m apart under a beam: two posts, each holding its four shafts."""

@@ -79,6 +79,8 @@ POST_MIN_WIDTH = 0.1
 POST_MAX_GROWTH = 4.0
 #: A piece of a slice counts as a post's cross-section from this many points.
 POST_MIN_SLICE_POINTS = 5
+#: How many slices (those with the most pieces first) :func:`posts` grows posts from.
+POST_TRIES = 16
 #: A part of :func:`parts` holds at least this share of the node's points (smaller
 #: pieces go with the nearest part).
 PART_MIN_SHARE = 0.05
@@ -558,10 +560,10 @@ def posts(xyz: npt.ArrayLike, *, params: SequenceParams | None = None) -> tuple[
     columns, a colonnade), which touch through it and so are one part for :func:`parts`.
 
     The node is cut into horizontal slices :data:`POST_SLICE` high and each slice's
-    occupied ``params.part_gap`` cells into pieces (8-connected). The slice with the most
-    pieces of at least :data:`POST_MIN_SLICE_POINTS` points holds the posts' cross-sections.
-    Each post grows up and down one slice at a time while the slice holds exactly one
-    piece over it, that piece over no other post, and no wider than
+    occupied ``params.part_gap`` cells into pieces (8-connected). From each of the
+    :data:`POST_TRIES` slices with the most pieces of at least :data:`POST_MIN_SLICE_POINTS`
+    points, each piece grows into a post up and down one slice at a time while the slice
+    holds exactly one piece over it, that piece over nothing else, and no wider than
     :data:`POST_MAX_GROWTH` times the first (a capital, not the slab). A post is kept when
     it is at least :data:`POST_MIN_HEIGHT` tall, :data:`POST_SLENDER` times its width,
     :data:`POST_MIN_WIDTH` wide and ``params.min_points`` points. The shafts of a clustered
@@ -609,8 +611,6 @@ def posts(xyz: npt.ArrayLike, *, params: SequenceParams | None = None) -> tuple[
     per_slice = np.bincount(slice_of[solid], minlength=shape[2])
     if per_slice.max() < 2:
         return None
-    best = np.flatnonzero(per_slice == per_slice.max())
-    k0 = int(best[len(best) // 2])
     # Pieces of neighbouring slices that share a cell: (lower, upper) pairs.
     below, above = lab[:, :, :-1], lab[:, :, 1:]
     both = (below > 0) & (above > 0)
@@ -619,29 +619,41 @@ def posts(xyz: npt.ArrayLike, *, params: SequenceParams | None = None) -> tuple[
     for lower, upper in np.unique(np.c_[below[both], above[both]], axis=0).tolist():
         up.setdefault(lower, []).append(upper)
         down.setdefault(upper, []).append(lower)
-    seeds = np.flatnonzero(solid & (slice_of == k0)).tolist()
-    owner = np.zeros(n_lab + 1, dtype=np.int64)  # 1-based post of each piece
-    owner[seeds] = np.arange(1, len(seeds) + 1)
-    for j, q in enumerate(seeds, start=1):
-        limit = POST_MAX_GROWTH * area[q] + 4
-        for step, back in ((up, down), (down, up)):
-            cur = q
-            while True:
-                nxt = step.get(cur, [])
-                if len(nxt) != 1 or owner[nxt[0]] or area[nxt[0]] > limit or back.get(nxt[0], []) != [cur]:
-                    break
-                cur = nxt[0]
-                owner[cur] = j
-    post = owner[piece]
-    found = []
-    for j in range(1, len(seeds) + 1):
-        m = np.flatnonzero(post == j)
-        if len(m) < params.min_points:
-            continue
-        height = float(np.ptp(a[m, 2])) + POST_SLICE
-        w = float(np.ptp(a[m, :2], axis=0).max())
-        if height >= POST_MIN_HEIGHT and height >= POST_SLENDER * (w + cell) and w >= POST_MIN_WIDTH:
-            found.append(m.astype(np.int64))
+    order = np.argsort(piece, kind="stable")
+    first = np.searchsorted(piece[order], np.arange(n_lab + 2))
+
+    def grown(k0: int) -> list[IntArray]:
+        """The posts whose cross-sections are the pieces of slice ``k0``."""
+        seeds = np.flatnonzero(solid & (slice_of == k0)).tolist()
+        found = []
+        for q in seeds:
+            chain = [q]
+            limit = POST_MAX_GROWTH * area[q] + 4
+            for step, back in ((up, down), (down, up)):
+                cur = q
+                while True:
+                    nxt = step.get(cur, [])
+                    if len(nxt) != 1 or area[nxt[0]] > limit or back.get(nxt[0], []) != [cur]:
+                        break
+                    cur = nxt[0]
+                    chain.append(cur)
+            m = np.concatenate([order[first[c]:first[c + 1]] for c in chain])
+            if len(m) < params.min_points:
+                continue
+            height = float(np.ptp(a[m, 2])) + POST_SLICE
+            w = float(np.ptp(a[m, :2], axis=0).max())
+            if height >= POST_MIN_HEIGHT and height >= POST_SLENDER * (w + cell) and w >= POST_MIN_WIDTH:
+                found.append(np.sort(m).astype(np.int64))
+        return found
+
+    # The slices with the most pieces first; the one that gives the most posts wins.
+    found: list[IntArray] = []
+    for k0 in np.argsort(-per_slice, kind="stable")[:POST_TRIES]:
+        if per_slice[k0] < max(2, len(found) + 1):
+            break
+        cand = grown(int(k0))
+        if len(cand) > len(found):
+            found = cand
     if len(found) < 2:
         return None
     return tuple(sorted(found, key=lambda c: int(c[0])))
