@@ -75,8 +75,9 @@ DECISIONS = ("split-model", "energy")
 #: tree-v17: a group called dome or pillar gave up the segments called pillar;
 #: tree-v18: instead, a root called dome or pillar that nothing splits gives up its posts
 #: HollowNet calls pillars (tree.sequences.posts, tree.build.POSTS_FROM);
-#: tree-v19: the posts come from the slice that gives the most (tree.sequences.POST_TRIES).
-TREE_ALGORITHM = "tree-v19"
+#: tree-v19: the posts come from the slice that gives the most (tree.sequences.POST_TRIES);
+#: tree-v20: the rest of a posts split is cut into its parts apart, stacked ones too.
+TREE_ALGORITHM = "tree-v20"
 #: Points sampled from each wall instance for the frames (tree/frames.py): a pier's face
 #: beside a bay's jamb is a strip a few tenths of a metre wide in a facade's wall.
 WALL_SAMPLE_POINTS = 16384

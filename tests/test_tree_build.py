@@ -615,6 +615,13 @@ def test_a_root_called_dome_gives_up_the_posts_called_pillar():
         assert count.max() >= 0.8 * np.sum(part == k)
         assert (r.class_id[r.instance == own[-1]] == int(ClassId.PILLAR)).all()
     assert len(set(own)) == 4
+    # The rest falls apart once its posts are out: the platform is no part of the slab and cap.
+    from tree.sequences import PART_SEQUENCE
+
+    rest = kids[-1]
+    assert r.nodes.sequence[r.nodes.children(rest)].tolist() == [PART_SEQUENCE] * 2
+    floor, top = np.arange(len(xyz))[-3000:], np.flatnonzero((part == 0) & (xyz[:, 2] >= 3.0))
+    assert len(np.intersect1d(np.unique(r.leaf[floor]), np.unique(r.leaf[top]))) == 0
     for whole, posts_as in ((ClassId.DOME, ClassId.OTHER), (ClassId.WALL, ClassId.PILLAR),
                             (ClassId.ARCH, ClassId.PILLAR), (ClassId.OTHER, ClassId.PILLAR)):
         r2 = build_tree(xyz, _SlenderPillarElseDome(int(posts_as), int(whole)), rng=0, split=_Never())

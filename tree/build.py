@@ -307,6 +307,7 @@ def build_tree(
     leaf_of = np.zeros(n, dtype=np.int64)
     is_leaf = [True]
     stack: list[tuple[int, IntArray]] = [(0, np.arange(n, dtype=np.int64))]
+    unjoined: set[int] = set()  # the rest of a posts split (:func:`_split_posts`)
 
     def _add_children(node: int, idx: IntArray, children: Any, sequence: int, e: FloatArray, x: float,
                       c_cls: IntArray, c_sc: FloatArray, c_pr: FloatArray) -> None:
@@ -376,6 +377,7 @@ def build_tree(
         children = [c for c, k in zip(found, p_cls, strict=True) if k == _PILLAR]
         if len(children) < 2:
             return False
+        n_pillars = len(children)
         part = np.full(len(pts), len(children), dtype=np.int64)
         for j, c in enumerate(children):
             part[c] = j
@@ -386,6 +388,8 @@ def build_tree(
         children = [np.flatnonzero(part == j).astype(np.int64) for j in range(int(part.max()) + 1)]
         c_cls, c_sc, c_pr = _classify(classifier, [pts[c] for c in children])
         _add_children(node, idx, children, POST_SEQUENCE, np.full(5, np.nan), np.nan, c_cls, c_sc, c_pr)
+        if len(children) > n_pillars:  # the rest: what the posts joined falls apart
+            unjoined.add(len(parent) - 1)
         return True
 
     def _split_parts(node: int, idx: IntArray, pts: FloatArray) -> None:
@@ -410,7 +414,10 @@ def build_tree(
         pts = a[idx]
         if _is_flat(pts, params):
             continue
-        gap = gaps(pts, params=params) if depth[node] == 0 else None
+        if node in unjoined:  # the rest of a posts split, in its parts apart whatever they are
+            gap = parts(pts, params=params, stacked=True)
+        else:
+            gap = gaps(pts, params=params) if depth[node] == 0 else None
         if gap is not None:  # parts that do not touch: split, whatever the classifier says
             c_cls, c_sc, c_pr = _classify(classifier, [pts[c] for c in gap.children])
             _add_children(node, idx, gap.children, gap.sequence, np.full(5, np.nan), np.nan, c_cls, c_sc, c_pr)

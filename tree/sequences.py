@@ -509,7 +509,7 @@ def gaps(xyz: npt.ArrayLike, *, params: SequenceParams | None = None) -> Proposa
     return Proposal(sequence=GAP_SEQUENCE, children=children, cuts=cuts, curve=None)
 
 
-def parts(xyz: npt.ArrayLike, *, params: SequenceParams | None = None) -> Proposal | None:
+def parts(xyz: npt.ArrayLike, *, params: SequenceParams | None = None, stacked: bool = False) -> Proposal | None:
     """The node as its parts apart, side by side: the sets of points joined by steps of at
     most ``params.part_gap`` (DBSCAN with one sample, :func:`primitives.dbscan.dbscan_labels`)
     that hold at least :data:`PART_MIN_SHARE` of the node and ``params.min_points`` (every
@@ -518,6 +518,10 @@ def parts(xyz: npt.ArrayLike, *, params: SequenceParams | None = None) -> Propos
     stages of a minaret apart at a balcony's shadow stand one on the other: one part).
     None when fewer than two parts are left (or ``params.part_gap`` is 0). Children in
     the order of their lowest point index; no cuts.
+
+    ``stacked=True`` keeps parts that stand one on another apart too (no joining by
+    x-y boxes): the rest of a frame whose posts were cut out (:func:`posts`), its slab
+    and dome above its platform.
 
     Unlike :func:`gaps` this sees any direction (a chattri standing 0.25 m off a minaret's
     balcony, beside it and overlapping it in height), and it is not a split by itself:
@@ -548,7 +552,8 @@ def parts(xyz: npt.ArrayLike, *, params: SequenceParams | None = None) -> Propos
     if small.any():
         _, j = cKDTree(a[~small]).query(a[small])
         part[small] = part[~small][j]
-    part = _side_by_side(a, part, len(big))
+    if not stacked:
+        part = _side_by_side(a, part, len(big))
     if part.max() == 0:
         return None
     children = tuple(np.flatnonzero(part == k).astype(np.int64) for k in range(int(part.max()) + 1))
