@@ -226,6 +226,23 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--no-progress", action="store_true", help="no progress bars")
     tr.set_defaults(func=_cmd_tree)
 
+    lb = sub.add_parser(
+        "labels",
+        help="per-point labels of a store from its tree (or its coarse segments)",
+        description=(
+            "Write the per-point class, instance, segment and score arrays of a store after "
+            "`hollowtree coarse` and `hollowtree tree`, as `hollowtree run` does, so that "
+            "`hollowtree export` can follow. Without a complete tree stage (or with --no-tree) "
+            "the labels are the coarse segments', each classified whole. Rerunning resumes."
+        ),
+    )
+    lb.add_argument("store", help="run store after `hollowtree coarse` (and `hollowtree tree`)")
+    lb.add_argument("--no-tree", action="store_true", help="label from the coarse segments even when the tree ran")
+    lb.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process")
+    lb.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
+    lb.add_argument("--no-progress", action="store_true", help="no progress bars")
+    lb.set_defaults(func=_cmd_labels)
+
     fe = sub.add_parser(
         "fit-energy",
         help="refit the tree's energy weights w and prior W on synthetic scenes",
@@ -338,6 +355,28 @@ def _cmd_tree(args: argparse.Namespace) -> int:
                              weights=args.weights, seed=args.seed, max_group_points=args.max_group_points)
     with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
         report = run_tree(args.store, params, runner=run)
+    print(report.summary())
+    return 0
+
+
+def _cmd_labels(args: argparse.Namespace) -> int:
+    from pipeline.graph import task_runner
+    from pipeline.labels import run_labels
+    from tiling.store import RunStore
+
+    stages = RunStore.open(args.store).attrs.get("stages", {})
+
+    def complete(stage: str) -> bool:
+        st = stages.get(stage)
+        return bool(st) and st.get("done") == st.get("units")
+
+    if not complete("coarse"):
+        raise PipelineError(f"store {args.store} has no complete coarse stage; run `hollowtree coarse` on it first")
+    use_tree = not args.no_tree and complete("tree")
+    if not args.no_tree and not use_tree:
+        print(f"{args.store}: no complete tree stage; labels from the coarse segments", file=sys.stderr)
+    with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
+        report = run_labels(args.store, use_tree=use_tree, runner=run)
     print(report.summary())
     return 0
 

@@ -599,3 +599,33 @@ def test_segment_points_holds_no_copy_of_the_points():
     assert [f["kind"] for f in fits] == ["plane"] * 3
     assert adjusted_rand_score(k, segment) > 0.95
     assert peak / n < 330, f"{peak / n:.0f} bytes per point"
+
+
+def test_steps_compose_into_an_export(tiled20, tmp_path, capsys):
+    """ingest -> coarse -> labels -> export: the labels step writes what export needs
+    (from the coarse segments when the tree never ran, saying so); on a store without
+    a coarse stage it is one line, exit 2."""
+    import shutil
+
+    import laspy
+
+    store = tmp_path / "s"
+    shutil.copytree(tiled20[1], store)
+    assert main(["export", str(store), "--las", str(tmp_path / "before.laz"), "--no-progress"]) == 2
+    capsys.readouterr()
+    assert main(["labels", str(store), "--scheduler", "sync", "--no-progress"]) == 0
+    out = capsys.readouterr()
+    assert "no complete tree stage" in out.err
+    assert "labels:" in out.out
+    assert main(["export", str(store), "--las", str(tmp_path / "out.laz"), "--no-progress"]) == 0
+    las = laspy.read(tmp_path / "out.laz")
+    assert len(las.points) == sum(int(s["point_count"]) for s in RunStore.open(store).attrs["sources"])
+    assert (np.asarray(las["segment_id"]) > 0).any()
+    capsys.readouterr()
+    s = RunStore.open(store, mode="a")
+    s.clear_records("coarse")
+    s.update_attrs({"stages": {k: v for k, v in s.attrs["stages"].items() if k != "coarse"}})
+    assert main(["labels", str(store), "--scheduler", "sync", "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert "no complete coarse stage" in err[0]
