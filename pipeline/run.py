@@ -53,17 +53,23 @@ def _stage_params(wf: Workflow) -> dict[str, dict[str, Any]]:
 
 
 def changed_stages(old: dict[str, Any] | None, new: dict[str, dict[str, Any]]) -> tuple[list[str], list[str]]:
-    """The stages to redo because a parameter changed, and what changed.
+    """The stages to redo because a parameter changed, and what changed. A stage ``old``
+    does not record has not run to its end with any parameters (a run interrupted before
+    it): nothing of it changed.
 
     >>> old = {"ingest": {"voxel": None}, "coarse": {"epsilon": 0.03}, "tree": {}, "labels": {}}
     >>> new = {"ingest": {"voxel": None}, "coarse": {"epsilon": 0.05}, "tree": {}, "labels": {}}
     >>> changed_stages(old, new)
     (['coarse', 'tree', 'labels'], ['coarse.epsilon: 0.03 -> 0.05'])
+    >>> changed_stages({"ingest": {"voxel": None}}, new)  # interrupted after the ingest
+    ([], [])
     """
     if not old:
         return [], []
     for i, stage in enumerate(STAGE_ORDER):
-        a, b = old.get(stage, {}), new.get(stage, {})
+        if stage not in old:
+            continue
+        a, b = old[stage], new.get(stage, {})
         if a != b:
             diffs = [f"{stage}.{k}: {a.get(k)!r} -> {b.get(k)!r}" for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
             return list(STAGE_ORDER[i:]), diffs

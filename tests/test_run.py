@@ -176,6 +176,7 @@ def test_sigkill_mid_run_then_resume(reference, scan, tmp_path):
     n_done = _n_records(store / "records" / "coarse")
     again = _cli("run", str(wf), "--no-progress")
     assert again.returncode == 0, again.stderr
+    assert "parameters changed" not in again.stdout  # nobody changed any
     assert "map units 0 run" in again.stdout  # ingest finished before the kill
     coarse_line = next(x for x in again.stdout.splitlines() if x.startswith("coarse:"))
     assert f"{n_done} skipped" in coarse_line
