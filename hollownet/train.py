@@ -259,7 +259,7 @@ def train(config: TrainConfig, *, out: str | Path, device: str = "auto", resume:
     sets = []
     for p in (train_p, test_p) if synthetic else ():
         bar = tqdm(total=p.n_per_class * len(OUTPUT_CLASSES), desc=f"data set {p.split}", unit="sample",
-                   disable=not progress, leave=False)
+                   disable=None if progress else True, leave=False)
 
         def step(done: int, total: int, bar: tqdm = bar) -> None:
             bar.update(done - bar.n)
@@ -311,7 +311,7 @@ def train(config: TrainConfig, *, out: str | Path, device: str = "auto", resume:
         flips = torch.as_tensor(rng.random((n, 2)) < 0.5)
         tot_loss, tot_ok, seen = 0.0, 0, 0
         bar = tqdm(range(0, n, config.batch_size), desc=f"epoch {epoch + 1}/{config.epochs}", unit="batch",
-                   disable=not progress, leave=False)
+                   disable=None if progress else True, leave=False)
         for a in bar:
             idx = order[a:a + config.batch_size]
             g = g_train[idx]

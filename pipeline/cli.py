@@ -420,7 +420,7 @@ def _cmd_fit_split(args: argparse.Namespace) -> int:
             raise ConfigError(f"--from {f}: file does not exist")
     scenes = () if args.no_synthetic else TRAINING_SCENES
     with tqdm(total=len(scenes) + len(procedural) + len(args.labelled), unit="scene", desc="fit-split",
-              disable=args.no_progress) as bar:
+              disable=True if args.no_progress else None) as bar:
         model = fit_split_from_scenes(args.work, scenes=scenes, seed=args.seed, threshold=args.threshold,
                                       on_scene=lambda i: bar.update(1), files=tuple(args.labelled),
                                       class_dim=args.class_dim, instance_dim=args.instance_dim,
@@ -602,7 +602,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         # Called once the arguments are checked and the scene is built: no bar before.
         bars.append(
             tqdm(total=n, unit="ray", unit_scale=True, desc=f"scanning {args.site}",
-                 disable=args.no_progress, leave=False)
+                 disable=True if args.no_progress else None, leave=False)
         )
 
     def on_rays(n: int) -> None:

@@ -114,7 +114,7 @@ def export_las(store: RunStore, out: str | Path, *, progress: bool = False) -> i
     total = sum(int(s["point_count"]) for s in sources)
     base = 0
     with laspy.open(tmp, mode="w", header=header, do_compress=out.suffix.lower() == ".laz") as writer, \
-            tqdm(total=total, unit="pt", unit_scale=True, desc="export: las", disable=not progress, leave=False) as bar:
+            tqdm(total=total, unit="pt", unit_scale=True, desc="export: las", disable=None if progress else True, leave=False) as bar:
         for s in sources:
             if not Path(s["path"]).is_file():
                 raise PipelineError(f"input {s['path']} of store {store.url} is gone; cannot export")

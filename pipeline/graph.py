@@ -338,7 +338,7 @@ class _LocalClient:
 
 
 def _bar(total: int, desc: str, progress: bool) -> tqdm:
-    return tqdm(total=total, desc=desc, unit="task", disable=not progress or total == 0,
+    return tqdm(total=total, desc=desc, unit="task", disable=True if not progress or total == 0 else None,
                 leave=False, file=sys.stderr)
 
 

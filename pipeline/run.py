@@ -91,7 +91,7 @@ def make_synthetic_input(wf: Workflow, *, progress: bool) -> Path | None:
     try:
         synth(spec.site, path, n_points=spec.points, seed=spec.seed,
               on_total=lambda n: bars.append(tqdm(total=n, unit="ray", unit_scale=True, leave=False,
-                                                  desc=f"input: scanning {spec.site}", disable=not progress,
+                                                  desc=f"input: scanning {spec.site}", disable=None if progress else True,
                                                   file=sys.stderr)),
               on_rays=lambda n: bars[-1].update(n))
     finally:

@@ -387,3 +387,13 @@ def test_in_child_task_over_the_worker_memory_limit_is_stopped():
             client.submit(in_child(_hold_memory), 3000, pure=False).result()
         assert client.submit(os.getpid, pure=False).result() == worker
         assert client.submit(in_child(_hold_memory), 100, pure=False).result() > 100
+
+
+def test_progress_bars_only_on_a_terminal(capsys):
+    """Output that is no terminal (a log file, a pipe) gets no progress bar, only the
+    stage lines; a bar's carriage returns would fill it."""
+    from pipeline.graph import task_runner
+
+    with task_runner("sync", progress=True) as run:
+        assert run(abs, [(-1,), (-2,)], "a stage") == [1, 2]
+    assert "\r" not in capsys.readouterr().err
