@@ -20,6 +20,8 @@ from tiling.errors import PipelineError
 __all__ = ["main", "build_parser"]
 
 logger = logging.getLogger("hollowtree")
+#: The loggers ``--verbose`` turns to DEBUG: this package's (each module logs under its name).
+OWN_LOGGERS = ("hollowtree", "pipeline", "tiling", "tree", "hollownet", "primitives", "scenes")
 
 
 def _version() -> str:
@@ -97,7 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Labelled architectural elements from terrestrial laser scans.",
     )
     parser.add_argument("--version", action="version", version=f"hollowtree {_version()}")
-    parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log hollowtree's debug messages")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
     s = sub.add_parser(
@@ -637,13 +639,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, --version, usage errors (exit 2, one line)
         return int(exc.code or 0) if not isinstance(exc.code, str) else 2
-    logging.basicConfig(
-        level=logging.DEBUG if args.verbose else logging.WARNING,
-        format="%(levelname)s %(name)s: %(message)s",
-    )
-    if not args.verbose:  # dask configures its own loggers at INFO
-        for name in ("distributed", "dask"):
-            logging.getLogger(name).setLevel(logging.WARNING)
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    for name in ("distributed", "dask"):  # dask configures its own loggers at INFO
+        logging.getLogger(name).setLevel(logging.WARNING)
+    if args.verbose:  # our own loggers only, not every library's
+        for name in OWN_LOGGERS:
+            logging.getLogger(name).setLevel(logging.DEBUG)
     if args.command is None:
         parser.print_help()
         return 2

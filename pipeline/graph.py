@@ -394,7 +394,7 @@ def task_runner(
     from distributed import Client
 
     # distributed sets its loggers to INFO when imported; keep them quiet unless the
-    # command runs with --verbose (root logger at DEBUG).
+    # caller's root logger asks for DEBUG (``--verbose`` turns on hollowtree's own only).
     if logging.getLogger().level > logging.DEBUG:
         for name in ("distributed", "distributed.scheduler", "distributed.nanny",
                      "distributed.core", "distributed.http.proxy", "distributed.worker"):

@@ -397,3 +397,20 @@ def test_progress_bars_only_on_a_terminal(capsys):
     with task_runner("sync", progress=True) as run:
         assert run(abs, [(-1,), (-2,)], "a stage") == [1, 2]
     assert "\r" not in capsys.readouterr().err
+
+
+def test_verbose_turns_on_our_own_loggers_only(tmp_path):
+    """``-v``: hollowtree's modules log at DEBUG, other libraries stay at WARNING."""
+    import logging
+
+    from pipeline.cli import OWN_LOGGERS, main
+
+    before = {n: logging.getLogger(n).level for n in (*OWN_LOGGERS, "fsspec")}
+    try:
+        assert main(["-v", "status", str(tmp_path / "none.zarr")]) == 2
+        assert logging.getLogger("tiling.store").getEffectiveLevel() == logging.DEBUG
+        assert logging.getLogger("fsspec").getEffectiveLevel() > logging.DEBUG
+        assert logging.getLogger().level > logging.DEBUG
+    finally:
+        for n, level in before.items():
+            logging.getLogger(n).setLevel(level)
