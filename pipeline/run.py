@@ -12,6 +12,7 @@ attribute ``workflow`` for ``hollowtree status``.
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
 from collections.abc import Callable
@@ -120,6 +121,13 @@ def _complete(store: Any, wf: Workflow) -> bool:
     return all(Path(p).exists() for p in (wf.outputs.las, wf.outputs.parquet, wf.outputs.png) if p)
 
 
+def _remove_if_empty(folder: Path) -> None:
+    """Remove ``folder`` when nothing is in it (the lock file gone with its run)."""
+    with contextlib.suppress(OSError):
+        if folder.is_dir() and not any(folder.iterdir()):
+            folder.rmdir()
+
+
 def run_workflow(
     wf: Workflow, *, progress: bool = True, say: Callable[[str], None] = print,
 ) -> RunReport:
@@ -154,62 +162,67 @@ def run_workflow(
     made = make_synthetic_input(wf, progress=progress)
     if made is not None:
         say(f"input: made synthetic scan {made}")
+    made_dir = "://" not in url and not Path(url).exists()
     if "://" not in url:  # the lock lives inside the store folder
         Path(url).mkdir(parents=True, exist_ok=True)
-    with StoreLock(url):
-        old = RunStore.open(url).attrs.get("workflow") if RunStore.exists(url) else None
-        if old == new_params and _complete(RunStore.open(url), wf):
-            report.nothing_to_do = True
-            report.class_counts = _class_counts(RunStore.open(url))
-            report.lines.append(f"nothing to do: every stage of {url} is recorded with these parameters "
-                                "and the outputs exist")
-            say(report.lines[-1])
-            report.seconds = time.perf_counter() - t0
-            return report
-        redo, diffs = changed_stages(old, new_params)
-        if redo:
-            say(f"parameters changed ({'; '.join(diffs)}): redoing {', '.join(redo)}")
-        with task_runner(wf.cluster.scheduler, workers=wf.cluster.workers, progress=progress) as runner:
-            rep = ingest([str(p) for p in wf.input.paths()], url, ingest_params, runner=runner,
-                         replace="ingest" in redo)
-            RunStore.open(url, mode="a").update_attrs({"workflow": {**(old or {}), "ingest": new_params["ingest"]}})
-            report.lines.append(f"ingest: {rep.n_tiles} tiles, {rep.n_points_in:,} input points; map units "
-                                f"{rep.maps_run} run, {rep.maps_skipped} skipped; tiles {rep.tiles_run} run, "
-                                f"{rep.tiles_skipped} skipped")
-            say(report.lines[-1])
-            if rep.maps_run or rep.tiles_run:  # what the ingest's readers and writers left
-                fresh_workers(runner)
-            crep = run_coarse(url, coarse_params, runner=runner)
-            report.lines.append(f"coarse: {crep.n_segments:,} segments; tiles {crep.tiles_run} run, "
-                                f"{crep.tiles_skipped} skipped; DBSCAN eps {crep.eps:.3f} m; "
-                                f"{crep.seconds:.1f} s (stitch {crep.stitch_seconds:.1f} s)")
-            say(report.lines[-1])
-            use_tree = wf.tree.enabled
-            if use_tree and crep.tiles_run:  # the coarse tasks' heaps, before torch and HollowNet
-                fresh_workers(runner)
-            if use_tree:
-                from pipeline.tree_stage import TreeStageParams, run_tree
-
-                trep = run_tree(url, TreeStageParams.from_workflow(wf.tree), runner=runner)
-                report.lines.append(trep.summary())
+    try:
+        with StoreLock(url):
+            old = RunStore.open(url).attrs.get("workflow") if RunStore.exists(url) else None
+            if old == new_params and _complete(RunStore.open(url), wf):
+                report.nothing_to_do = True
+                report.class_counts = _class_counts(RunStore.open(url))
+                report.lines.append(f"nothing to do: every stage of {url} is recorded with these parameters "
+                                    "and the outputs exist")
                 say(report.lines[-1])
-                if trep.batches_run:  # torch and HollowNet stay in the workers that ran the tree
+                report.seconds = time.perf_counter() - t0
+                return report
+            redo, diffs = changed_stages(old, new_params)
+            if redo:
+                say(f"parameters changed ({'; '.join(diffs)}): redoing {', '.join(redo)}")
+            with task_runner(wf.cluster.scheduler, workers=wf.cluster.workers, progress=progress) as runner:
+                rep = ingest([str(p) for p in wf.input.paths()], url, ingest_params, runner=runner,
+                             replace="ingest" in redo)
+                RunStore.open(url, mode="a").update_attrs({"workflow": {**(old or {}), "ingest": new_params["ingest"]}})
+                report.lines.append(f"ingest: {rep.n_tiles} tiles, {rep.n_points_in:,} input points; map units "
+                                    f"{rep.maps_run} run, {rep.maps_skipped} skipped; tiles {rep.tiles_run} run, "
+                                    f"{rep.tiles_skipped} skipped")
+                say(report.lines[-1])
+                if rep.maps_run or rep.tiles_run:  # what the ingest's readers and writers left
                     fresh_workers(runner)
-            lrep = run_labels(url, use_tree=use_tree, runner=runner)
-            report.lines.append(lrep.summary())
-            say(report.lines[-1])
-        store = RunStore.open(url, mode="a")
-        store.update_attrs({"workflow": new_params})
-        report.class_counts = _class_counts(store)
-        if set(report.class_counts) <= {CLASS_NAMES[0]}:  # nothing found: say so, once
-            report.lines.append(f"labels: nothing could be labelled in {report.class_counts.get(CLASS_NAMES[0], 0):,} "
-                                "points (no surface or element found: too few, too sparse or too noisy points?); "
-                                "every point keeps class 0")
-            say(report.lines[-1])
-        from pipeline.export import write_outputs
+                crep = run_coarse(url, coarse_params, runner=runner)
+                report.lines.append(f"coarse: {crep.n_segments:,} segments; tiles {crep.tiles_run} run, "
+                                    f"{crep.tiles_skipped} skipped; DBSCAN eps {crep.eps:.3f} m; "
+                                    f"{crep.seconds:.1f} s (stitch {crep.stitch_seconds:.1f} s)")
+                say(report.lines[-1])
+                use_tree = wf.tree.enabled
+                if use_tree and crep.tiles_run:  # the coarse tasks' heaps, before torch and HollowNet
+                    fresh_workers(runner)
+                if use_tree:
+                    from pipeline.tree_stage import TreeStageParams, run_tree
 
-        for line in write_outputs(store, wf, progress=progress):
-            report.lines.append(line)
-            say(line)
+                    trep = run_tree(url, TreeStageParams.from_workflow(wf.tree), runner=runner)
+                    report.lines.append(trep.summary())
+                    say(report.lines[-1])
+                    if trep.batches_run:  # torch and HollowNet stay in the workers that ran the tree
+                        fresh_workers(runner)
+                lrep = run_labels(url, use_tree=use_tree, runner=runner)
+                report.lines.append(lrep.summary())
+                say(report.lines[-1])
+            store = RunStore.open(url, mode="a")
+            store.update_attrs({"workflow": new_params})
+            report.class_counts = _class_counts(store)
+            if set(report.class_counts) <= {CLASS_NAMES[0]}:  # nothing found: say so, once
+                report.lines.append(f"labels: nothing could be labelled in {report.class_counts.get(CLASS_NAMES[0], 0):,} "
+                                    "points (no surface or element found: too few, too sparse or too noisy points?); "
+                                    "every point keeps class 0")
+                say(report.lines[-1])
+            from pipeline.export import write_outputs
+
+            for line in write_outputs(store, wf, progress=progress):
+                report.lines.append(line)
+                say(line)
+    finally:
+        if made_dir:  # a run that wrote nothing (no scheduler, no input) leaves no folder behind
+            _remove_if_empty(Path(url))
     report.seconds = time.perf_counter() - t0
     return report

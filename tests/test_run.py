@@ -414,3 +414,13 @@ def test_verbose_turns_on_our_own_loggers_only(tmp_path):
     finally:
         for n, level in before.items():
             logging.getLogger(n).setLevel(level)
+
+
+def test_an_unreachable_scheduler_is_one_line_and_leaves_no_folder(scan, tmp_path):
+    store = tmp_path / "never.zarr"
+    wf = _workflow(tmp_path, scan, str(store), extra=f"cluster: {{scheduler: 'tcp://127.0.0.1:{_free_port()}'}}\n")
+    r = _cli("run", str(wf), "--no-progress")
+    assert r.returncode == 2
+    assert len(r.stderr.strip().splitlines()) == 1
+    assert "cannot reach the Dask scheduler" in r.stderr
+    assert not store.exists()
