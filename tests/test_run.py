@@ -273,6 +273,17 @@ def test_store_on_s3_moto_server_and_a_changed_parameter(reference, scan, tmp_pa
         server.wait()
 
 
+def test_an_unreachable_object_store_is_one_line(scan, tmp_path):
+    pytest.importorskip("s3fs", reason="s3fs is a dev dependency")
+    env = dict(os.environ, AWS_ACCESS_KEY_ID="test", AWS_SECRET_ACCESS_KEY="test", AWS_DEFAULT_REGION="us-east-1",
+               AWS_ENDPOINT_URL=f"http://127.0.0.1:{_free_port()}", AWS_MAX_ATTEMPTS="1")
+    wf = _workflow(tmp_path, scan, "s3://nowhere/run.zarr")
+    r = _cli("run", str(wf), "--no-progress", env=env)
+    assert r.returncode == 2
+    assert len(r.stderr.strip().splitlines()) == 1
+    assert "s3://nowhere/run.zarr cannot be reached" in r.stderr
+
+
 def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)

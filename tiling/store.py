@@ -567,9 +567,18 @@ class _UnitWriter:
 
 
 def check_writable(url: str | Path) -> None:
-    """Raise :class:`StoreError` if a local store path cannot be created or written."""
+    """Raise :class:`StoreError` if a local store path cannot be created or written, or
+    an object store (fsspec URL) cannot be reached: one line, not the client's traceback."""
     url = str(url)
     if _is_url(url):
+        import fsspec
+
+        try:
+            fs, root = fsspec.core.url_to_fs(url)
+            fs.exists(root)
+        except Exception as exc:  # any client's error (no endpoint, no credentials, no package)
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+            raise StoreError(f"store {url} cannot be reached: {type(exc).__name__}: {first}") from None
         return
     p = Path(url)
     parent = p.resolve().parent
