@@ -322,8 +322,11 @@ class _LocalClient:
     def _start(self) -> None:
         from distributed import Client, LocalCluster
 
+        # CRITICAL: a worker's heartbeat racing the scheduler's close logs an ERROR traceback
+        # at the end of a successful run (dask/distributed#7891); a task's own error reaches
+        # the client as its exception, one line from the CLI.
         self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=self.processes,
-                                    dashboard_address=":0", silence_logs=logging.ERROR)
+                                    dashboard_address=":0", silence_logs=logging.CRITICAL)
         self.client = Client(self.cluster)
 
     def renew(self) -> None:
