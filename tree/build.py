@@ -373,11 +373,12 @@ def build_tree(
         found = posts(pts, params=params)
         if found is None:
             return False
-        p_cls, _, _ = _classify(classifier, [pts[c] for c in found])
-        children = [c for c, k in zip(found, p_cls, strict=True) if k == _PILLAR]
-        if len(children) < 2:
+        p_cls, p_sc, p_pr = _classify(classifier, [pts[c] for c in found])
+        pillar = np.flatnonzero(p_cls == _PILLAR)
+        if len(pillar) < 2:
             return False
-        n_pillars = len(children)
+        children = [found[j] for j in pillar]
+        c_cls, c_sc, c_pr = p_cls[pillar], p_sc[pillar], p_pr[pillar]
         part = np.full(len(pts), len(children), dtype=np.int64)
         for j, c in enumerate(children):
             part[c] = j
@@ -385,10 +386,14 @@ def build_tree(
         if 0 < rest.sum() < max(params.min_points, 2):  # a few points: with the nearest post
             _, near = cKDTree(pts[~rest]).query(pts[rest])
             part[rest] = part[~rest][near]
-        children = [np.flatnonzero(part == j).astype(np.int64) for j in range(int(part.max()) + 1)]
-        c_cls, c_sc, c_pr = _classify(classifier, [pts[c] for c in children])
+            children = [np.flatnonzero(part == j).astype(np.int64) for j in range(len(children))]
+            c_cls, c_sc, c_pr = _classify(classifier, [pts[c] for c in children])
+        elif rest.any():  # the rest: one more child, classified alone (the posts already are)
+            children.append(np.flatnonzero(rest).astype(np.int64))
+            r_cls, r_sc, r_pr = _classify(classifier, [pts[children[-1]]])
+            c_cls, c_sc, c_pr = np.r_[c_cls, r_cls], np.r_[c_sc, r_sc], np.vstack([c_pr, r_pr])
         _add_children(node, idx, children, POST_SEQUENCE, np.full(5, np.nan), np.nan, c_cls, c_sc, c_pr)
-        if len(children) > n_pillars:  # the rest: what the posts joined falls apart
+        if len(children) > len(pillar):  # the rest: what the posts joined falls apart
             unjoined.add(len(parent) - 1)
         return True
 
