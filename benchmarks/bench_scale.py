@@ -143,12 +143,65 @@ def reference_read(path: Path, min_seconds: float = 3.0) -> float:
             return n / elapsed
 
 
+PREDICT_WORKERS = (1, 2, 4, 16, 64)
+
+
+def projection(store: Path, n_points: int, wall: float, stage_rows: list[dict[str, float]],
+               target_points: float) -> dict[str, Any]:
+    """What the recorded units of ``store`` predict (``pipeline.timing``): the makespan on
+    1-64 workers, and ``target_points`` on 64 workers (the units repeated, the driver's
+    and the outputs' seconds grown alike); the rest of the run (process and cluster
+    starts, new workers between stages) is added as measured. Also each wave's largest
+    unit over its median, in points."""
+    import statistics
+
+    from pipeline.timing import WAVES, predict_seconds, waves
+    from tiling.store import RunStore
+
+    st = RunStore.open(str(store))
+    wl = waves({name: st.records(name) for name in {n for _, _, n in WAVES}})
+    stages = st.attrs.get("stages", {})
+    driver = {k: float(v.get("driver_s", 0.0)) for k, v in stages.items()}
+    staged = sum(float(v.get("wall_s", 0.0)) for v in stages.values())
+    outputs = sum(r["seconds"] for r in stage_rows if r["stage"] == "outputs")
+    other = max(wall - staged - outputs, 0.0)
+    pred = {w: predict_seconds(wl, driver, w) + outputs + other for w in PREDICT_WORKERS}
+    repeat = target_points / n_points
+    big = predict_seconds(wl, driver, 64, repeat=repeat) + outputs * repeat + other
+    balance = {f"{w.stage}.{w.name}": (max(w.points) / statistics.median(w.points)
+                                       if statistics.median(w.points) else None) for w in wl}
+    return {"predicted_s": pred, "speedup_16_over_2": pred[2] / pred[16], "target_points": target_points,
+            "target_64_workers_s": big, "driver_s": driver, "outputs_s": outputs, "other_s": other,
+            "largest_over_median_points": balance,
+            "waves": [{"stage": w.stage, "wave": w.name, "units": len(w.wall), "unit_s": sum(w.wall),
+                       "max_s": max(w.wall), "cpu_s": sum(w.cpu), "max_points": max(w.points)} for w in wl]}
+
+
+def print_projection(n: int, workers: int, p: dict[str, Any]) -> None:
+    print(f"{n:,} points, {workers} workers: recorded units predict "
+          + ", ".join(f"{w} workers {s:.1f} s" for w, s in p["predicted_s"].items())
+          + f"; 16 over 2: {p['speedup_16_over_2']:.2f}x; {p['target_points'] / 1e9:.2f} B points on 64 workers: "
+          f"{p['target_64_workers_s'] / 60:.1f} min")
+    for w in p["waves"]:
+        ratio = p["largest_over_median_points"].get(f"{w['stage']}.{w['wave']}")
+        print(f"    {w['stage']:<7}{w['wave']:<8}{w['units']:>5} units {w['unit_s']:>8.1f} s (max {w['max_s']:.1f} s)"
+              f"{w['cpu_s']:>9.1f} CPU s; largest unit {w['max_points']:,} points"
+              + (f" ({ratio:.1f}x the median)" if ratio else ""))
+    print(f"    driver alone: {sum(p['driver_s'].values()):.1f} s "
+          f"({', '.join(f'{k} {v:.1f}' for k, v in p['driver_s'].items())}); outputs {p['outputs_s']:.1f} s; "
+          f"starts and new workers {p['other_s']:.1f} s")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", nargs="+", type=float, default=[1e6, 1e7, 1e8])
     ap.add_argument("--workflow", type=Path, default=REPO / "workflows" / "local.yaml")
     ap.add_argument("--set", dest="overrides", action="append", default=[])
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--workers", nargs="+", type=int, default=None,
+                    help="run every size once per worker count (cluster.workers), side by side")
+    ap.add_argument("--target", type=float, default=1.36e9,
+                    help="points of the scan the recorded units project to on 64 workers (default 1.36e9)")
     ap.add_argument("--reference", type=Path, default=None,
                     help="LAZ/LAS file of the reference read (default: the scan nearest 10 M points)")
     args = ap.parse_args()
@@ -180,20 +233,24 @@ def main() -> None:
     print(f"reference read: {ref.name} (laspy, every core)")
     results = []
     for n, store, sets, wf in runs:
-        before = reference_read(ref)
-        print(f"{n:,} points: reference read {before / 1e6:.2f} M points/s")
-        if store.exists():
-            shutil.rmtree(store)
-        cmd = [sys.executable, "-m", "pipeline.cli", "run", str(args.workflow), "--no-progress"]
-        for s in sets:
-            cmd += ["--set", s]
-        print(f"{n:,} points: {' '.join(cmd[2:])}")
-        rc, wall, rows = measure(cmd)
-        if rc != 0:
-            raise SystemExit(f"run of {n:,} points failed with exit code {rc}")
-        n_in = sum(probe(p).point_count for p in wf.input.paths())
-        results.append({"points": n_in, "wall_s": wall, "stages": rows, "reference_read": before})
-        shutil.rmtree(store, ignore_errors=True)
+        for workers in args.workers or [wf.cluster.workers]:
+            before = reference_read(ref)
+            print(f"{n:,} points: reference read {before / 1e6:.2f} M points/s")
+            if store.exists():
+                shutil.rmtree(store)
+            cmd = [sys.executable, "-m", "pipeline.cli", "run", str(args.workflow), "--no-progress"]
+            for s in [*sets, *([f"cluster.workers={workers}"] if args.workers else [])]:
+                cmd += ["--set", s]
+            print(f"{n:,} points: {' '.join(cmd[2:])}")
+            rc, wall, rows = measure(cmd)
+            if rc != 0:
+                raise SystemExit(f"run of {n:,} points failed with exit code {rc}")
+            n_in = sum(probe(p).point_count for p in wf.input.paths())
+            proj = projection(store, n_in, wall, rows, args.target)
+            print_projection(n_in, workers, proj)
+            results.append({"points": n_in, "workers": workers, "wall_s": wall, "stages": rows,
+                            "reference_read": before, "projection": proj})
+            shutil.rmtree(store, ignore_errors=True)
     after = reference_read(ref)
     print(f"after the last run: reference read {after / 1e6:.2f} M points/s")
 
@@ -211,15 +268,21 @@ def main() -> None:
         print(f"{r['points']:>12,} {'total':<8}{r['wall_s']:>9.1f}{rate:>12,.0f} pts/s "
               f"(all cores); peak process {peak / 2**20:.0f} MB; over the reference read "
               f"({r['reference_read'] / 1e6:.2f} M/s) {rate / r['reference_read']:.3f}")
-    if len(results) >= 2:
-        a, b = results[0], results[-1]
+    if args.workers and len(args.workers) >= 2:
+        for n in sorted({r["points"] for r in results}):
+            walls = {r["workers"]: r["wall_s"] for r in results if r["points"] == n}
+            lo, hi = min(walls), max(walls)
+            print(f"{n:,} points: wall with {lo} workers over {hi} workers: {walls[lo] / walls[hi]:.2f}")
+    by_size = [r for r in results if r["workers"] == results[0]["workers"]]
+    if len(by_size) >= 2:
+        a, b = by_size[0], by_size[-1]
         lin = (b["wall_s"] / b["points"]) / (a["wall_s"] / a["points"])
         print(f"time per point, {b['points']:,} over {a['points']:,}: {lin:.2f} (linear = 1)")
-        for c, b in zip(results[1:-1], results[2:], strict=True):  # each size over the one before (the smallest left out)
+        for c, b in zip(by_size[1:-1], by_size[2:], strict=True):  # each size over the one before (the smallest left out)
             pk = max(x["peak_process"] for x in b["stages"]) / max(x["peak_process"] for x in c["stages"])
             print(f"peak single-process memory, {b['points']:,} over {c['points']:,}: {pk:.2f} (flat = 1)")
-        if len(results) == 2:
-            c, b = results
+        if len(by_size) == 2:
+            c, b = by_size
             pk = max(x["peak_process"] for x in b["stages"]) / max(x["peak_process"] for x in c["stages"])
             print(f"peak single-process memory, {b['points']:,} over {c['points']:,}: {pk:.2f} (flat = 1)")
     if args.json:

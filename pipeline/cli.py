@@ -348,7 +348,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _cmd_tree(args: argparse.Namespace) -> int:
-    from pipeline.graph import task_runner
+    from pipeline.graph import task_runner, timed_stage
     from pipeline.tree_stage import TreeStageParams, run_tree
     from tiling.store import RunStore
 
@@ -356,13 +356,14 @@ def _cmd_tree(args: argparse.Namespace) -> int:
     params = TreeStageParams(max_depth=args.max_depth, decision=args.decision, threshold=args.threshold, batch_points=args.batch_points,
                              weights=args.weights, seed=args.seed, max_group_points=args.max_group_points)
     with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
-        report = run_tree(args.store, params, runner=run)
+        with timed_stage(str(args.store), "tree", run):
+            report = run_tree(args.store, params, runner=run)
     print(report.summary())
     return 0
 
 
 def _cmd_labels(args: argparse.Namespace) -> int:
-    from pipeline.graph import task_runner
+    from pipeline.graph import task_runner, timed_stage
     from pipeline.labels import run_labels
     from tiling.store import RunStore
 
@@ -378,7 +379,8 @@ def _cmd_labels(args: argparse.Namespace) -> int:
     if not args.no_tree and not use_tree:
         print(f"{args.store}: no complete tree stage; labels from the coarse segments", file=sys.stderr)
     with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
-        report = run_labels(args.store, use_tree=use_tree, runner=run)
+        with timed_stage(str(args.store), "labels", run):
+            report = run_labels(args.store, use_tree=use_tree, runner=run)
     print(report.summary())
     return 0
 
@@ -481,6 +483,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 def _cmd_status(args: argparse.Namespace) -> int:
     import json
 
+    from pipeline.timing import WAVES, waves
     from tiling.lock import StoreLock
     from tiling.store import RunStore
 
@@ -493,6 +496,7 @@ def _cmd_status(args: argparse.Namespace) -> int:
     expected = {"ingest": len(attrs.get("ingest", {}).get("tiles", []))}
     units = {"ingest": "tiles", "coarse": "tiles", "tree": "batches", "labels": "ranges"}
     wf = attrs.get("workflow", {})
+    timed = waves({name: store.records(name) for name in {n for _, _, n in WAVES}})
     for stage in ("ingest", "coarse", "tree", "labels"):
         recs = store.records(stage)
         info = stages.get(stage, {})
@@ -504,7 +508,24 @@ def _cmd_status(args: argparse.Namespace) -> int:
             continue
         params = wf.get(stage) or info.get("params") or attrs.get(stage, {}).get("params") or {}
         print(f"  {stage:<8} {done}/{total} {units[stage]} done; parameters: {json.dumps(params, sort_keys=True)}")
+        if "wall_s" in info:
+            print(f"           {info['wall_s']:.1f} s, of which {info['driver_s']:.1f} s in the driver alone")
+        for w in timed:
+            if w.stage == stage:
+                print("           " + _wave_line(w))
     return 0
+
+
+def _wave_line(w: Any) -> str:
+    """One line of ``hollowtree status`` about a wave of units (:class:`pipeline.timing.Wave`)."""
+    import statistics
+
+    pts = sorted(w.points)
+    med = statistics.median(pts) if pts else 0
+    spread = f" (largest {pts[-1] / med:.1f}x the median)" if med else ""
+    return (f"{w.name}: {len(w.wall)} units on {w.workers} workers; unit seconds total {sum(w.wall):.1f}, "
+            f"median {statistics.median(w.wall):.2f}, max {max(w.wall):.2f}; CPU {sum(w.cpu):.1f} s; "
+            f"points per unit median {med:,.0f}, max {pts[-1] if pts else 0:,}{spread}")
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
@@ -528,7 +549,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 def _cmd_coarse(args: argparse.Namespace) -> int:
     from pipeline.coarse import CoarseParams, run_coarse
-    from pipeline.graph import task_runner
+    from pipeline.graph import task_runner, timed_stage
     from primitives.ransac import RansacParams
     from tiling.store import RunStore
 
@@ -541,7 +562,8 @@ def _cmd_coarse(args: argparse.Namespace) -> int:
         group_gap=args.group_gap,
     )
     with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
-        report = run_coarse(args.store, params, runner=run)
+        with timed_stage(str(args.store), "coarse", run):
+            report = run_coarse(args.store, params, runner=run)
     print(report.summary())
     return 0
 
@@ -568,7 +590,7 @@ def _int_list(text: str) -> tuple[int, ...]:
 def _cmd_ingest(args: argparse.Namespace) -> int:
     import gc
 
-    from pipeline.graph import task_runner, tune_process_for_streaming
+    from pipeline.graph import task_runner, timed_stage, tune_process_for_streaming
     from tiling.errors import ConfigError
     from tiling.ingest import IngestParams, ingest
 
@@ -584,7 +606,8 @@ def _cmd_ingest(args: argparse.Namespace) -> int:
                          processes=args.processes) as run:
             if in_process:
                 gc.freeze()  # the cluster's own long-lived objects too
-            report = ingest([str(p) for p in args.inputs], args.store, params, runner=run)
+            with timed_stage(str(args.store), "ingest", run):
+                report = ingest([str(p) for p in args.inputs], args.store, params, runner=run)
     except OSError as exc:
         if args.scheduler not in (None, "sync") and "scheduler" not in str(exc).lower():
             raise ConfigError(f"cannot reach the Dask scheduler {args.scheduler}: {exc}") from None

@@ -24,6 +24,7 @@ import os
 import pickle
 import signal
 import sys
+import time
 import traceback
 import uuid
 from collections.abc import Callable, Iterator, Sequence
@@ -33,7 +34,7 @@ from tqdm import tqdm
 
 from tiling.errors import PipelineError
 
-__all__ = ["fresh_workers", "in_child", "task_runner", "tune_process_for_streaming"]
+__all__ = ["fresh_workers", "in_child", "task_runner", "task_seconds", "timed_stage", "tune_process_for_streaming"]
 
 logger = logging.getLogger(__name__)
 
@@ -288,6 +289,26 @@ def _read_result(fd: int, pid: int, limit: int | None) -> tuple[bytes, int | Non
                 return b"".join(chunks), used
 
 
+@contextlib.contextmanager
+def timed_stage(url: str, stage: str, runner: Callable[..., Any]) -> Iterator[None]:
+    """Time the stage run inside the block and keep it in the store's ``stages`` attribute:
+    ``wall_s`` (the whole stage) and ``driver_s`` (the part spent outside its task waves:
+    planning, stitching, reading tables, in this process alone). A stage that ran no task
+    (every unit already recorded) keeps the times of the run that made it."""
+    from tiling.store import RunStore
+
+    t0, busy0 = time.perf_counter(), task_seconds(runner)
+    yield
+    wall, busy = time.perf_counter() - t0, task_seconds(runner) - busy0
+    if busy <= 0:
+        return
+    store = RunStore.open(url, mode="a")
+    stages = store.attrs.get("stages", {})
+    if stage in stages:
+        stages[stage] = {**stages[stage], "wall_s": round(wall, 3), "driver_s": round(max(wall - busy, 0.0), 3)}
+        store.update_attrs({"stages": stages})
+
+
 def fresh_workers(runner: Runner) -> None:
     """Replace the worker processes of a runner's local cluster by new ones (a no-op for
     the in-process runner and for a cluster this command did not start).
@@ -297,8 +318,8 @@ def fresh_workers(runner: Runner) -> None:
     its own working set, and the ingest's and coarse stage's heaps are not all handed back
     by ``malloc_trim`` (a coarse task peaked 70-120 MB higher, a tree task 150-250 MB
     higher, in workers that had run the stage before; docs/benchmarks.md, "End to end").
-    ``hollowtree run`` calls it after every stage that ran tasks. Takes 1.1-1.4 s
-    (a new local cluster, :class:`_LocalClient`).
+    ``hollowtree run`` calls it after every stage that ran tasks. Takes about 1.2 s
+    (new worker processes under the same scheduler, :class:`_LocalClient`).
     """
     restart = getattr(runner, "restart_workers", None)
     if restart is not None:
@@ -306,14 +327,18 @@ def fresh_workers(runner: Runner) -> None:
 
 
 class _LocalClient:
-    """A local cluster of this command and its client; :meth:`renew` replaces both, so the
-    next stage runs in new worker processes.
+    """A local cluster of this command and its client; :meth:`renew` replaces its worker
+    processes, so the next stage runs in new ones.
 
-    A new cluster rather than ``client.restart()``: a nanny restart once left a
-    ``hollowtree run`` waiting 120 s for workers that never came back and then failed
-    (2026-11-26, a 1 M-point benchmark run); closing a cluster and starting one takes
-    about as long as a restart (1.1-1.3 s, measured three times) and has no such wait.
+    The workers are scaled to none and back (new processes, about 1.1-1.2 s), the
+    scheduler stays: its dashboard address, printed once when the run starts, stays
+    alive to the end. Not ``client.restart()``: a nanny restart once left a run waiting
+    120 s for workers that never came back. Should new workers not come within
+    ``RENEW_TIMEOUT`` seconds, the whole cluster is replaced (a warning names its new
+    dashboard address).
     """
+
+    RENEW_TIMEOUT = 60.0
 
     def __init__(self, workers: int, processes: bool) -> None:
         self.workers, self.processes = workers, processes
@@ -330,8 +355,20 @@ class _LocalClient:
         self.client = Client(self.cluster)
 
     def renew(self) -> None:
-        self.close()
-        self._start()
+        try:
+            self.cluster.scale(0)
+            end = time.monotonic() + self.RENEW_TIMEOUT
+            while self.client.scheduler_info()["workers"]:
+                if time.monotonic() > end:
+                    raise TimeoutError("old workers did not leave")
+                time.sleep(0.02)
+            self.cluster.scale(self.workers)
+            self.client.wait_for_workers(self.workers, timeout=self.RENEW_TIMEOUT)
+        except (TimeoutError, OSError) as exc:
+            self.close()
+            self._start()
+            logger.warning("new workers did not start (%s); a new local cluster, dashboard %s", exc,
+                           self.client.dashboard_link)
 
     def close(self) -> None:
         try:
@@ -345,6 +382,28 @@ def _bar(total: int, desc: str, progress: bool) -> tqdm:
                 leave=False, file=sys.stderr)
 
 
+def _timed(run: Callable[..., list[Any]]) -> Runner:
+    """``run`` that also counts the wall seconds spent in it (``task_seconds()``): the
+    time a stage's driver waited on its tasks, the rest of the stage being its own."""
+    spent = [0.0]
+
+    def timed(fn: Callable[..., Any], args_list: Sequence[tuple[Any, ...]], desc: str) -> list[Any]:
+        t0 = time.perf_counter()
+        try:
+            return run(fn, args_list, desc)
+        finally:
+            spent[0] += time.perf_counter() - t0
+
+    timed.task_seconds = lambda: spent[0]  # type: ignore[attr-defined]
+    return timed
+
+
+def task_seconds(runner: Runner) -> float:
+    """Wall seconds ``runner`` has spent running tasks so far (0 for a plain callable)."""
+    get = getattr(runner, "task_seconds", None)
+    return float(get()) if get is not None else 0.0
+
+
 def _sync_runner(progress: bool) -> Runner:
     def run(fn: Callable[..., Any], args_list: Sequence[tuple[Any, ...]], desc: str) -> list[Any]:
         out = []
@@ -354,7 +413,7 @@ def _sync_runner(progress: bool) -> Runner:
                 bar.update(1)
         return out
 
-    return run
+    return _timed(run)
 
 
 def _client_runner(client_of: Callable[[], Any], progress: bool) -> Runner:
@@ -377,7 +436,7 @@ def _client_runner(client_of: Callable[[], Any], progress: bool) -> Runner:
         finally:
             client.cancel([f for f in futures if not f.done()])
 
-    return run
+    return _timed(run)
 
 
 @contextlib.contextmanager

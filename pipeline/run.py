@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.coarse import COARSE_ALGORITHM
+from pipeline.graph import timed_stage
 from pipeline.tree_stage import TREE_ALGORITHM
 from pipeline.workflow import Workflow
 from tiling.classes import CLASS_NAMES
@@ -40,6 +41,13 @@ class RunReport:
     class_counts: dict[str, int] = field(default_factory=dict)
     nothing_to_do: bool = False
     seconds: float = 0.0
+
+
+def _input_points(wf: Workflow) -> int:
+    """Points in the workflow's input files, from their headers."""
+    from tiling.readers import probe
+
+    return sum(probe(p).point_count for p in wf.input.paths())
 
 
 def _stage_params(wf: Workflow) -> dict[str, dict[str, Any]]:
@@ -179,9 +187,13 @@ def run_workflow(
             redo, diffs = changed_stages(old, new_params)
             if redo:
                 say(f"parameters changed ({'; '.join(diffs)}): redoing {', '.join(redo)}")
-            with task_runner(wf.cluster.scheduler, workers=wf.cluster.workers, progress=progress) as runner:
-                rep = ingest([str(p) for p in wf.input.paths()], url, ingest_params, runner=runner,
-                             replace="ingest" in redo)
+            scheduler = wf.cluster.scheduler
+            if scheduler is None and _input_points(wf) < wf.cluster.in_process_below:
+                scheduler = "sync"  # a small scan: starting a cluster would take longer than its tasks
+            with task_runner(scheduler, workers=wf.cluster.workers, progress=progress) as runner:
+                with timed_stage(url, "ingest", runner):
+                    rep = ingest([str(p) for p in wf.input.paths()], url, ingest_params, runner=runner,
+                                 replace="ingest" in redo)
                 RunStore.open(url, mode="a").update_attrs({"workflow": {**(old or {}), "ingest": new_params["ingest"]}})
                 report.lines.append(f"ingest: {rep.n_tiles} tiles, {rep.n_points_in:,} input points; map units "
                                     f"{rep.maps_run} run, {rep.maps_skipped} skipped; tiles {rep.tiles_run} run, "
@@ -189,7 +201,8 @@ def run_workflow(
                 say(report.lines[-1])
                 if rep.maps_run or rep.tiles_run:  # what the ingest's readers and writers left
                     fresh_workers(runner)
-                crep = run_coarse(url, coarse_params, runner=runner)
+                with timed_stage(url, "coarse", runner):
+                    crep = run_coarse(url, coarse_params, runner=runner)
                 report.lines.append(f"coarse: {crep.n_segments:,} segments; tiles {crep.tiles_run} run, "
                                     f"{crep.tiles_skipped} skipped; DBSCAN eps {crep.eps:.3f} m; "
                                     f"{crep.seconds:.1f} s (stitch {crep.stitch_seconds:.1f} s)")
@@ -200,12 +213,14 @@ def run_workflow(
                 if use_tree:
                     from pipeline.tree_stage import TreeStageParams, run_tree
 
-                    trep = run_tree(url, TreeStageParams.from_workflow(wf.tree), runner=runner)
+                    with timed_stage(url, "tree", runner):
+                        trep = run_tree(url, TreeStageParams.from_workflow(wf.tree), runner=runner)
                     report.lines.append(trep.summary())
                     say(report.lines[-1])
                     if trep.batches_run:  # torch and HollowNet stay in the workers that ran the tree
                         fresh_workers(runner)
-                lrep = run_labels(url, use_tree=use_tree, runner=runner)
+                with timed_stage(url, "labels", runner):
+                    lrep = run_labels(url, use_tree=use_tree, runner=runner)
                 report.lines.append(lrep.summary())
                 say(report.lines[-1])
             store = RunStore.open(url, mode="a")

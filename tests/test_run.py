@@ -71,7 +71,8 @@ def reference(scan, tmp_path_factory):
     """The plain local run (a LocalCluster of 2 processes), with every output."""
     d = tmp_path_factory.mktemp("ref")
     store = str(d / "ref.zarr")
-    wf = _workflow(d, scan, store, extra=f"outputs: {{las: {d / 'out.laz'}, parquet: {d / 'tables'}, png: {d / 'v.png'}}}\n")
+    wf = _workflow(d, scan, store, extra=f"outputs: {{las: {d / 'out.laz'}, parquet: {d / 'tables'}, png: {d / 'v.png'}}}\n"
+                                        "cluster: {in_process_below: 0}\n")
     proc = _cli("run", str(wf), "--no-progress")
     assert proc.returncode == 0, proc.stderr
     return {"store": store, "workflow": wf, "dir": d, "stdout": proc.stdout, "labels": _labels(store)}
@@ -88,6 +89,23 @@ def test_local_run_labels_every_point(reference, scan):
     assert (lab["class"][seg > 0] > 0).all()
     assert "class" in reference["stdout"]
     assert "done in" in reference["stdout"]
+
+
+def test_small_scan_runs_in_process_with_the_cluster_labels(reference, scan, tmp_path):
+    """Under ``cluster.in_process_below`` points a local run starts no cluster (no dashboard
+    address) and gives the labels of the run on a LocalCluster; each stage and unit
+    record says how long it took."""
+    store = str(tmp_path / "s.zarr")
+    wf = _workflow(tmp_path, scan, store, extra="cluster: {in_process_below: 100000000}\n")
+    proc = _cli("run", str(wf))
+    assert proc.returncode == 0, proc.stderr
+    assert "dask dashboard" not in proc.stderr  # printed where a cluster starts
+    _same(_labels(store), reference["labels"])
+    st = RunStore.open(store)
+    assert all({"wall_s", "driver_s"} <= set(st.attrs["stages"][s]) for s in ("ingest", "coarse", "tree", "labels"))
+    recs = [r for s in ("ingest", "coarse", "tree", "labels") for r in st.records(s).values()]
+    assert all(r["wall_s"] > 0 and r["cpu_s"] >= 0 for r in recs)
+    assert len({r["worker"] for r in recs}) == 1  # every unit in the one process
 
 
 def test_rerun_after_completion_does_nothing(reference):
@@ -301,13 +319,16 @@ def test_fresh_workers_replaces_only_our_own_worker_processes():
         fresh_workers(run)
         assert run(os.getpid, [()], "pid") == [os.getpid()]
     with task_runner(None, workers=1, progress=False) as run:
+        scheduler = run.restart_workers.__self__.cluster.scheduler_address
         before = run(os.getpid, [()], "pid")
         fresh_workers(run)
         after = run(os.getpid, [()], "pid")
-        fresh_workers(run)  # a second time too (a new local cluster each time)
+        fresh_workers(run)  # a second time too
         again = run(os.getpid, [()], "pid")
         assert not _alive(before[0])
         assert not _alive(after[0])
+        # new workers, the same scheduler: the dashboard printed at the start stays alive
+        assert run.restart_workers.__self__.cluster.scheduler_address == scheduler
     assert len({*before, *after, *again}) == 3
     assert os.getpid() not in before + after
 

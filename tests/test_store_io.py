@@ -3,6 +3,7 @@ writer that encodes Zarr chunks itself (read back through Zarr)."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -123,6 +124,26 @@ def test_arrays_are_made_with_few_store_requests(tmp_path):
     assert zarr.open_group(tmp_path / "s.zarr", mode="r")["tiles/5/xyz"].metadata.codecs[1].cname.value == "lz4"
 
 
+def test_a_record_says_where_and_how_long_its_unit_ran(store):
+    """Each record holds the seconds since its handle was opened or last recorded, the
+    process's CPU seconds, the worker (host:pid) and when it finished; ``info`` wins."""
+    import time
+
+    t0 = time.time()
+    busy = time.perf_counter() + 0.05
+    while time.perf_counter() < busy:  # 50 ms of CPU
+        pass
+    store.record("tree", "0", {"params_hash": "h"})
+    store.record("tree", "1", {"params_hash": "h", "worker": "mine"})
+    r0, r1 = store.records("tree")["0"], store.records("tree")["1"]
+    assert r0["wall_s"] >= 0.05
+    assert r0["cpu_s"] >= 0.04
+    assert r1["wall_s"] < r0["wall_s"]  # the clock restarts at each record
+    assert r0["worker"].endswith(f":{os.getpid()}")
+    assert r1["worker"] == "mine"
+    assert t0 <= r0["finished"] <= time.time() + 1
+
+
 def test_records_skip_a_unit_killed_before_its_record(store, tmp_path, recwarn):
     """A record is one object written after its unit's data: a writer killed before it
     leaves a unit folder without its zarr.json (and a local store's temporary file),
@@ -132,7 +153,8 @@ def test_records_skip_a_unit_killed_before_its_record(store, tmp_path, recwarn):
     base = tmp_path / "s.zarr" / "records" / "coarse"
     (base / "5").mkdir()  # killed before its zarr.json
     (base / "zarr.0123abcd.partial").write_bytes(b"{")  # killed mid-write
-    assert store.records("coarse") == {"3": {"params_hash": "abc", "n_points": 5},
-                                       "4": {"params_hash": "abc", "n_points": 7}}
+    got = store.records("coarse")
+    assert {u: {k: r[k] for k in ("params_hash", "n_points")} for u, r in got.items()} == {
+        "3": {"params_hash": "abc", "n_points": 5}, "4": {"params_hash": "abc", "n_points": 7}}
     assert store.records("tree") == {}
     assert not [w for w in recwarn if "not recognized" in str(w.message)]

@@ -19,6 +19,7 @@ import asyncio
 import json
 import logging
 import os
+import socket
 import time
 import warnings
 from collections.abc import Iterable, Mapping
@@ -101,6 +102,11 @@ class RunStore:
     def __init__(self, root: zarr.Group, url: str) -> None:
         self._root = root
         self.url = url
+        self._restart_clock()
+
+    def _restart_clock(self) -> None:
+        # the unit clock: a task opens its own handle, so this is the start of its unit
+        self._clock = (time.perf_counter(), time.process_time(), os.getpid())
 
     # ------------------------------------------------------------------ opening
     @classmethod
@@ -382,10 +388,22 @@ class RunStore:
 
     # ------------------------------------------------------------------ records
     def record(self, stage: str, unit: str, info: Mapping[str, Any]) -> None:
-        """Record unit ``unit`` of ``stage`` as done. Call only after its data is written."""
+        """Record unit ``unit`` of ``stage`` as done. Call only after its data is written.
+
+        The record also holds where and how long the unit ran, unless ``info`` says so
+        itself: ``wall_s`` and ``cpu_s`` (the seconds since this handle was opened or last
+        recorded a unit; CPU seconds of the process, whose own pool threads count with
+        it), ``worker`` (host and process id) and ``finished`` (Unix time).
+        """
+        wall0, cpu0, pid = self._clock
+        timing = {"wall_s": round(time.perf_counter() - wall0, 4),
+                  # a forked child's CPU time starts at zero
+                  "cpu_s": round(time.process_time() - (cpu0 if pid == os.getpid() else 0.0), 4),
+                  "worker": f"{socket.gethostname()}:{os.getpid()}", "finished": round(time.time(), 3)}
         g = self._require_group(f"records/{stage}")
         # One write of one small object: the group and its attributes together.
-        g.create_group(str(unit), attributes=dict(info), overwrite=True)
+        g.create_group(str(unit), attributes={**timing, **dict(info)}, overwrite=True)
+        self._restart_clock()
 
     def records(self, stage: str) -> dict[str, dict[str, Any]]:
         """Completion records of ``stage``: unit -> info. Unreadable records are skipped."""
