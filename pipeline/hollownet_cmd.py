@@ -25,7 +25,8 @@ import yaml
 from pipeline.cli import _positive_int
 from tiling.errors import ConfigError, InputFileError, PipelineError
 
-__all__ = ["add_labelled_args", "add_parsers", "class_map_of", "cmd_classify", "cmd_train", "read_labelled"]
+__all__ = ["add_labelled_args", "add_parsers", "class_map_of", "cmd_classify", "cmd_train", "procedural_samples",
+           "read_labelled"]
 
 
 def add_parsers(sub: Any) -> None:
@@ -49,6 +50,11 @@ def add_parsers(sub: Any) -> None:
     t.add_argument("--overwrite", action="store_true", help="replace an existing weights file")
     t.add_argument("--no-progress", action="store_true", help="no progress bars")
     add_labelled_args(t, "training samples")
+    t.add_argument("--procedural", type=int, default=0, metavar="N",
+                   help="add samples cut from the first N procedural training sites (scenes/procedural.py; "
+                        "training seeds only), each scanned with its seed's noise and registration error")
+    t.add_argument("--procedural-points", type=_positive_int, default=2_000_000,
+                   help="points per procedural site (default 2,000,000)")
     t.set_defaults(func=cmd_train)
 
     c = sub.add_parser(
@@ -95,10 +101,22 @@ def cmd_train(args: argparse.Namespace) -> int:
         config = TrainConfig.from_dict(data)
     except TypeError as exc:
         raise ConfigError(f"invalid training config: {exc}") from None
-    if args.no_synthetic and not args.labelled:
-        raise ConfigError("--no-synthetic needs at least one --from FILE")
+    if args.procedural < 0:
+        raise ConfigError(f"--procedural must be a count >= 0; got {args.procedural}")
+    if args.no_synthetic and not args.labelled and not args.procedural:
+        raise ConfigError("--no-synthetic needs at least one --from FILE or --procedural N")
     class_map = class_map_of(args.class_map)
     labelled = []
+    if args.procedural:
+        from hollownet.train import default_data_dir
+        from scenes.procedural import split_seeds
+
+        cache = Path(config.data_dir) if config.data_dir else default_data_dir()
+        for seed in split_seeds("train", args.procedural):
+            name, tr, te = procedural_samples(seed, args.procedural_points, cache, seed=config.seed,
+                                              variants=config.variants)
+            print(f"procedural site {seed}: {len(tr['labels'])} training and {len(te['labels'])} test samples")
+            labelled.append((name, tr, te))
     for path in args.labelled:
         xyz, _, cls, inst = read_labelled(path, args.class_dim, args.instance_dim, class_map)
         tr, te = labelled_samples(xyz, cls, inst, seed=config.seed, variants=config.variants, source=path.name)
@@ -110,6 +128,49 @@ def cmd_train(args: argparse.Namespace) -> int:
                    synthetic=not args.no_synthetic)
     print(report.summary())
     return 0
+
+
+def procedural_samples(site_seed: int, n_points: int, cache: Path, *, seed: int, variants: int
+                       ) -> tuple[str, dict[str, Any], dict[str, Any]]:
+    """HollowNet samples cut from procedural training site ``site_seed``, scanned at about
+    ``n_points`` points with its seed's noise and registration error: the samples
+    ``hollowtree train --from`` takes from that scan (made once, then read from
+    ``cache/procedural``).
+
+    Raises
+    ------
+    ConfigError
+        If ``site_seed`` is not a training seed (``scenes.procedural.SPLITS["train"]``).
+    """
+    import tempfile
+
+    from hollownet.dataset import labelled_samples
+    from scenes.procedural import SPLITS, scan_draw
+    from scenes.synth import synth
+
+    lo, hi = SPLITS["train"]
+    if not lo <= site_seed < hi:
+        raise ConfigError(f"procedural seed {site_seed} is not a training seed ({lo}-{hi - 1}): HollowNet is "
+                          "trained on training seeds only")
+    name = f"gen-{site_seed}-{n_points}.laz"
+    out = cache / "procedural" / f"samples-{site_seed}-{n_points}-s{seed}-v{variants}.npz"
+    if not out.is_file():
+        out.parent.mkdir(parents=True, exist_ok=True)
+        d = scan_draw(site_seed)
+        with tempfile.TemporaryDirectory(dir=out.parent) as tmp:
+            laz = Path(tmp) / name
+            synth("gen", laz, n_points=n_points, seed=site_seed, noise=d.noise,
+                  registration_error=d.registration_error, overwrite=True, workers=2)
+            xyz, _, cls, inst = read_labelled(laz, "gt_class", "gt_instance")
+        tr, te = labelled_samples(xyz, cls, inst, seed=seed, variants=variants, source=name)
+        tmp_out = out.with_suffix(".tmp.npz")
+        np.savez_compressed(tmp_out, **{f"train_{k}": v for k, v in tr.items()},
+                            **{f"test_{k}": v for k, v in te.items()})
+        tmp_out.replace(out)
+    with np.load(out) as z:
+        tr = {k[6:]: z[k] for k in z.files if k.startswith("train_")}
+        te = {k[5:]: z[k] for k in z.files if k.startswith("test_")}
+    return name, tr, te
 
 
 def add_labelled_args(p: argparse.ArgumentParser, what: str) -> None:

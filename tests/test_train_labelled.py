@@ -146,3 +146,30 @@ def test_the_split_model_fits_on_training_seeds_only(tmp_path):
 
     with pytest.raises(ConfigError, match="procedural seed 200000 is not a training seed"):
         procedural_groups(200_000, tmp_path)
+
+
+def test_procedural_samples_are_the_ones_train_from_takes_of_the_same_scan(tmp_path):
+    """``train --procedural N`` cuts the samples ``--from`` cuts from the same procedural
+    scan (cached once), and takes training seeds only."""
+    from pipeline.hollownet_cmd import procedural_samples, read_labelled
+    from scenes.procedural import scan_draw
+    from scenes.synth import synth
+
+    with pytest.raises(ConfigError, match="procedural seed 100000 is not a training seed"):
+        procedural_samples(100_000, 50_000, tmp_path, seed=0, variants=1)
+    name, tr, te = procedural_samples(3, 60_000, tmp_path, seed=0, variants=1)
+    assert (tmp_path / "procedural" / "samples-3-60000-s0-v1.npz").is_file()
+    d = scan_draw(3)
+    synth("gen", tmp_path / name, n_points=60_000, seed=3, noise=d.noise, registration_error=d.registration_error,
+          workers=2)
+    xyz, _, cls, inst = read_labelled(tmp_path / name, "gt_class", "gt_instance")
+    tr2, te2 = labelled_samples(xyz, cls, inst, seed=0, variants=1, source=name)
+    assert len(tr["labels"]) > 0
+    for a, b in ((tr, tr2), (te, te2)):
+        np.testing.assert_array_equal(a["labels"], b["labels"])
+        np.testing.assert_array_equal(a["grids"], b["grids"])
+    again = procedural_samples(3, 60_000, tmp_path, seed=0, variants=1)[1]  # from the cache
+    np.testing.assert_array_equal(again["grids"], tr["grids"])
+    proc = _cli("train", "--procedural", "-1", "--out", str(tmp_path / "w.pt"))
+    assert proc.returncode == 2
+    assert "--procedural must be a count >= 0" in proc.stderr
