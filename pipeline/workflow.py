@@ -179,7 +179,7 @@ class ClusterSection(_Section):
     scheduler: str | None = Field(None, description="Dask scheduler address; null = a local cluster; 'sync' = in process")
     workers: PosInt = Field(2, description="workers of the local cluster")
     in_process_below: int = Field(
-        300_000, ge=0,
+        2_000_000, ge=0,
         description="a local run (scheduler null) of a scan with fewer input points runs its tasks in this "
                     "process, with no cluster to start; 0 = always a cluster")
 
