@@ -22,12 +22,19 @@ another, e.g. the 10 M-point scan when only ``--sizes 1e8`` runs). Our machines 
 change kind between sessions; the end-to-end rate over the reference read rate taken just
 before the run is a ratio that stays comparable where absolute rates do not.
 
+After each run it reads the store's unit records and stage times and prints what they
+predict for 1, 2, 4, 16 and 64 workers and for ``--target`` points (1.36 B) on 64
+workers (:mod:`pipeline.timing`: every wave list-scheduled, plus the driver's seconds,
+plus the run's other seconds as measured), and per wave its units, seconds and largest
+unit over the median in points. ``--workers 1 2`` runs every size once per worker count
+and prints the wall of the fewest over that of the most.
+
 A "process" is a worker with the task it runs: a task's child process forked from its
 worker (``pipeline.graph.in_child``) counts with the worker, as its own pages (USS) on top
 of the worker's resident memory (``_procs.tree_rss``).
 
 Run: ``python benchmarks/bench_scale.py [--sizes 1e6 1e7 1e8] [--workflow workflows/local.yaml]
-[--set key=value ...] [--json FILE]``. Scans are cached in ``out/`` by the workflow's
+[--set key=value ...] [--workers 1 2] [--target 1.36e9] [--json FILE]``. Scans are cached in ``out/`` by the workflow's
 ``input.synth.out`` pattern; stores are written to ``out/scale-<N>.zarr`` and deleted
 first.
 """

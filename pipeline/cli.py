@@ -146,6 +146,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--voxel", type=_float, help="keep one point per voxel of this size, metres")
     g.add_argument("--bbox", type=_bbox, help="only tiles meeting XMIN,YMIN,XMAX,YMAX")
     g.add_argument("--tiles", type=_int_list, help="only these tile ids, e.g. 0,1,5")
+    g.add_argument("--units", default=None, metavar="UNIT",
+                   help="metres per coordinate unit of the inputs (e.g. 0.3048) or a unit's name (m, ft, us-ft); "
+                        "default: the linear unit of their CRS, metres where they have none")
     g.add_argument("--chunk-size", type=_positive_int, default=1_000_000,
                    help="records per map task (default 1,000,000)")
     g.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process; "
@@ -222,6 +225,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="build the tree of a larger element group on a seeded sample of this many points; "
                          "its points take their nearest sampled point's labels (default 1,000,000; 0 = never; else >= 1000)")
     tr.add_argument("--weights", help="HollowNet weights (default: the shipped ones)")
+    tr.add_argument("--device", choices=["cpu", "cuda", "auto"], default="cpu",
+                   help="where HollowNet runs in each worker (default cpu; auto = CUDA where torch sees a GPU)")
     tr.add_argument("--seed", type=int, default=0)
     tr.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process")
     tr.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
@@ -357,7 +362,7 @@ def _cmd_tree(args: argparse.Namespace) -> int:
                              weights=args.weights, seed=args.seed, max_group_points=args.max_group_points)
     with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
         with timed_stage(str(args.store), "tree", run):
-            report = run_tree(args.store, params, runner=run)
+            report = run_tree(args.store, params, runner=run, device=args.device)
     print(report.summary())
     return 0
 
@@ -596,7 +601,7 @@ def _cmd_ingest(args: argparse.Namespace) -> int:
 
     params = IngestParams(
         tile_size=args.tile_size, buffer=args.buffer, voxel=args.voxel, bbox=args.bbox,
-        tiles=args.tiles, chunk_size=args.chunk_size,
+        tiles=args.tiles, chunk_size=args.chunk_size, units=_units(args.units),
     )
     try:
         in_process = args.scheduler == "sync" or (args.scheduler is None and not args.processes)
@@ -614,6 +619,16 @@ def _cmd_ingest(args: argparse.Namespace) -> int:
         raise
     print(report.summary())
     return 0
+
+
+def _units(text: str | None) -> float | str | None:
+    """``--units``: a number (metres per unit) or a unit's name, as ``IngestParams`` takes it."""
+    if text is None:
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        return text
 
 
 def _cmd_synth(args: argparse.Namespace) -> int:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import math
 import os
 import tempfile
@@ -50,6 +51,8 @@ from tiling.grid import TileGrid
 from tiling.store import CHUNK_POINTS, RunStore
 
 __all__ = ["CoarseParams", "PRIMITIVE_CODES", "coarse_tile", "run_coarse", "CoarseReport"]
+
+logger = logging.getLogger(__name__)
 
 STAGE = "coarse"
 #: Records of the block tasks of tiles above ``block_points`` (unit ``"<tile>.<block>"``).
@@ -1163,6 +1166,9 @@ def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tupl
 # consecutive (Morton-sorted, so compact) rows drawn over the whole scan.
 EPS_QUANTILE = 0.25
 EPS_FACTOR = 9.0
+#: A scan whose spacing (as measured for the eps) is above this many metres gets a warning:
+#: columns and mouldings 0.3-1 m across need points a few cm apart to be cut out.
+MAX_SPACING = 0.5
 #: The eps of a scan with no spacing to measure (a handful of points, exact duplicates), m.
 FALLBACK_EPS = 0.3
 # The version of the stage's code where it changes a result (recorded with a run's
@@ -1243,6 +1249,11 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     if eps is None or cluster_epsilon is None:
         sizes = {t: int(done_ingest[str(t)].get("n_points", 0)) for t in tiles}
         spacing = scan_spacing(store, sizes, seed=params.seed)
+        if spacing is not None and spacing > MAX_SPACING:
+            logger.warning("%s: the scan's points are %.2f m apart (8-NN spacing, 25 %% quantile): hollowtree is "
+                           "made for terrestrial scans of buildings, a few cm apart, and will label a scan this "
+                           "sparse poorly (an airborne scan? coordinates in another unit? see ingest.units)",
+                           url, spacing)
         auto_eps = EPS_FACTOR * spacing if spacing is not None else FALLBACK_EPS
         eps = auto_eps if eps is None else eps
         if cluster_epsilon is None:

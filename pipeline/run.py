@@ -27,6 +27,7 @@ from pipeline.graph import timed_stage
 from pipeline.tree_stage import TREE_ALGORITHM
 from pipeline.workflow import Workflow
 from tiling.classes import CLASS_NAMES
+from tiling.errors import ConfigError
 
 __all__ = ["run_workflow", "RunReport", "STAGE_ORDER", "changed_stages", "make_synthetic_input"]
 
@@ -56,7 +57,7 @@ def _stage_params(wf: Workflow) -> dict[str, dict[str, Any]]:
         "ingest": {"inputs": [str(p) for p in wf.input.paths()], **wf.ingest.model_dump(mode="json")},
         "coarse": {**wf.coarse.model_dump(mode="json"), "algorithm": COARSE_ALGORITHM},
         # the algorithm's version too: a rerun after a change of the tree's code redoes it
-        "tree": {**wf.tree.model_dump(mode="json"), "algorithm": TREE_ALGORITHM},
+        "tree": {**wf.tree.model_dump(mode="json", exclude={"device"}), "algorithm": TREE_ALGORITHM},
         "labels": {},
     }
 
@@ -72,6 +73,8 @@ def changed_stages(old: dict[str, Any] | None, new: dict[str, dict[str, Any]]) -
     (['coarse', 'tree', 'labels'], ['coarse.epsilon: 0.03 -> 0.05'])
     >>> changed_stages({"ingest": {"voxel": None}}, new)  # interrupted after the ingest
     ([], [])
+    >>> changed_stages({"ingest": {}, "coarse": {"epsilon": 0.05}}, new)  # voxel: added later, at None
+    ([], [])
     """
     if not old:
         return [], []
@@ -79,8 +82,9 @@ def changed_stages(old: dict[str, Any] | None, new: dict[str, dict[str, Any]]) -
         if stage not in old:
             continue
         a, b = old[stage], new.get(stage, {})
-        if a != b:
-            diffs = [f"{stage}.{k}: {a.get(k)!r} -> {b.get(k)!r}" for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
+        # a key the store does not record was added since it was made: at None, no change
+        diffs = [f"{stage}.{k}: {a.get(k)!r} -> {b.get(k)!r}" for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
+        if diffs:
             return list(STAGE_ORDER[i:]), diffs
     return [], []
 
@@ -152,11 +156,17 @@ def run_workflow(
     url = wf.store
     report = RunReport(store=url)
     check_writable(url)
+    if wf.tree.enabled and wf.tree.device == "cuda" and wf.cluster.scheduler in (None, "sync"):
+        import torch  # the workers are this machine's: say so before anything runs
+
+        if not torch.cuda.is_available():
+            raise ConfigError("tree.device is cuda but torch sees no CUDA device on this machine; use cpu or auto")
     new_params = _stage_params(wf)
     ip = wf.ingest
     ingest_params = IngestParams(
         tile_size=ip.tile_size, tile_points=ip.tile_points, buffer=ip.buffer, voxel=ip.voxel,
         bbox=ip.bbox, tiles=tuple(ip.tiles) if ip.tiles is not None else None, chunk_size=ip.chunk_size,
+        units=ip.units,
     )
     cp = wf.coarse
     coarse_params = CoarseParams(
@@ -199,6 +209,11 @@ def run_workflow(
                                     f"{rep.maps_run} run, {rep.maps_skipped} skipped; tiles {rep.tiles_run} run, "
                                     f"{rep.tiles_skipped} skipped")
                 say(report.lines[-1])
+                unit = RunStore.open(url).attrs.get("coords", {}).get("unit")
+                if unit:  # not metres
+                    report.lines.append(f"ingest: input coordinates in {unit}; the store and every length "
+                                        "parameter are in metres")
+                    say(report.lines[-1])
                 if rep.maps_run or rep.tiles_run:  # what the ingest's readers and writers left
                     fresh_workers(runner)
                 with timed_stage(url, "coarse", runner):
@@ -214,7 +229,8 @@ def run_workflow(
                     from pipeline.tree_stage import TreeStageParams, run_tree
 
                     with timed_stage(url, "tree", runner):
-                        trep = run_tree(url, TreeStageParams.from_workflow(wf.tree), runner=runner)
+                        trep = run_tree(url, TreeStageParams.from_workflow(wf.tree), runner=runner,
+                                        device=wf.tree.device)
                     report.lines.append(trep.summary())
                     say(report.lines[-1])
                     if trep.batches_run:  # torch and HollowNet stay in the workers that ran the tree

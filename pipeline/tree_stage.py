@@ -215,12 +215,26 @@ def _worker_threads() -> int | None:
     return 1
 
 
-def _load_classifier(weights: str | None) -> None:
+#: Where HollowNet runs (``tree.device``): ``auto`` is CUDA where the worker's torch sees a
+#: GPU, else the CPU.
+DEVICES = ("cpu", "cuda", "auto")
+
+
+def _device(device: str) -> str:
+    """``device`` with ``auto`` resolved in this process."""
+    if device != "auto":
+        return device
+    import torch
+
+    return "cuda" if torch.cuda.is_available() else "cpu"
+
+
+def _load_classifier(weights: str | None, device: str = "cpu") -> None:
     """Load HollowNet in this process as :func:`tree_batch` will use it (the worker's, before
     it forks a batch's child: ``pipeline.graph.in_child``)."""
     from hollownet.predict import Classifier
 
-    Classifier.get(weights, num_threads=_worker_threads())
+    Classifier.get(weights, device=_device(device), num_threads=_worker_threads())
 
 
 _PLANAR = np.array([int(c) for c in PLANAR_CLASSES], dtype=np.uint8)
@@ -385,7 +399,7 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
     offsets = store.read_unit("coarse/csr", ["offsets"])["offsets"]
     lo, hi = int(offsets[segs[0]]), int(offsets[segs[1]])
     n = hi - lo
-    clf = Classifier.get(params.weights, num_threads=_worker_threads())
+    clf = Classifier.get(params.weights, device=_device(cfg.get("device", "cpu")), num_threads=_worker_threads())
     bounds = list(range(segs[0], segs[1] + 1)) if starts is None else [*starts, segs[1]]
 
     def ground_level(s: int, s_end: int) -> float | None:
@@ -449,8 +463,16 @@ def _ground_levels(store: RunStore) -> np.ndarray:
     return ground_levels(bbox, n_points=cols["n_points"][order], min_points=200) - z0
 
 
-def run_tree(url: str, params: TreeStageParams, *, runner: Any) -> TreeReport:
-    """Run the tree stage on a store whose coarse stage is complete (resumable per batch)."""
+def run_tree(url: str, params: TreeStageParams, *, runner: Any, device: str = "cpu") -> TreeReport:
+    """Run the tree stage on a store whose coarse stage is complete (resumable per batch).
+
+    ``device`` (:data:`DEVICES`) is where each worker runs HollowNet; it is not a
+    parameter of the result (a store's batches may come from workers of either kind).
+    On a GPU a batch runs in its worker, not in a forked child (CUDA does not survive a
+    fork).
+    """
+    if device not in DEVICES:
+        raise ConfigError(f"tree device must be one of {list(DEVICES)}; got {device!r}")
     t0 = time.perf_counter()
     store = RunStore.open(url, mode="a")
     attrs = store.attrs
@@ -460,7 +482,7 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any) -> TreeReport:
         raise PipelineError(f"store {url}: the coarse stage is not complete; run it first")
     h = hashlib.sha256(json.dumps([params.to_dict(), coarse["params_hash"], TREE_ALGORITHM], sort_keys=True)
                        .encode()).hexdigest()[:16]
-    cfg = {"params": params.to_dict(), "params_hash": h}
+    cfg = {"params": params.to_dict(), "params_hash": h, "device": device}
     if stages.get(STAGE, {}).get("params_hash") not in (None, h):
         store.clear_records(STAGE)
     offsets = store.read_unit("coarse/csr", ["offsets"])["offsets"]
@@ -479,7 +501,8 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any) -> TreeReport:
     # Each batch in a child process of its worker (in_child), HollowNet loaded once in the
     # worker before its first fork: a long-lived worker's later batches otherwise peak
     # above its first (what its heap and torch kept of the earlier ones).
-    results = runner(in_child(tree_batch, functools.partial(_load_classifier, params.weights)),
+    task = tree_batch if device != "cpu" else in_child(tree_batch, functools.partial(_load_classifier, params.weights))
+    results = runner(task,
                      [(url, b, batches[b], cfg, None if ground is None else ground[slice(*batches[b])],
                        starts_in(b)) for b in todo], "tree: batches")
     for b, info in zip(todo, results, strict=True):

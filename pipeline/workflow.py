@@ -92,6 +92,18 @@ class IngestSection(_Section):
     bbox: tuple[float, float, float, float] | None = Field(None, description="only tiles meeting [xmin, ymin, xmax, ymax]")
     tiles: list[Annotated[int, Field(ge=0)]] | None = Field(None, description="only these tile ids")
     chunk_size: PosInt = Field(1_000_000, description="records per map task")
+    units: PosFloat | str | None = Field(
+        None, description="metres per coordinate unit of the inputs (0.3048) or a unit's name (m, ft, us-ft); "
+                          "null = the linear unit of their CRS, metres where they have none")
+
+    @field_validator("units")
+    @classmethod
+    def _unit_known(cls, v: float | str | None) -> float | str | None:
+        from tiling.readers import UNIT_METRES
+
+        if isinstance(v, str) and v.lower() not in UNIT_METRES:
+            raise ValueError(f"{v!r} is not a unit this knows ({', '.join(sorted(UNIT_METRES))}); give metres per unit")
+        return v
 
 
 class CoarseSection(_Section):
@@ -149,6 +161,8 @@ class TreeSection(_Section):
     threshold: float | None = Field(None, description="a split is kept when its score (the split model's probability, or xi) >= this; null = the model's own")
     batch_points: PosInt = Field(200_000, description="points per tree task (small segments are batched)")
     weights: str | None = Field(None, description="HollowNet weights file; null = the shipped default")
+    device: Literal["cpu", "cuda", "auto"] = Field(
+        "cpu", description="where HollowNet runs in each worker: cpu, cuda, or auto (CUDA where the worker's torch sees a GPU); not a parameter of the result")
     split_model: str | None = Field(
         None, description="split model file (written by hollowtree fit-split); null = the shipped tree/data/split-v1.json")
     seed: int = Field(0, description="segment g builds its tree with seed [seed, g]")

@@ -7,6 +7,7 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import laspy
@@ -249,7 +250,8 @@ def test_truncated_laz_is_refused_and_nothing_recorded(scan_file, tmp_path, caps
 @pytest.mark.parametrize(
     ("args", "needle"),
     [(["--tile-size", "0"], "tile_size"), (["--tile-size", "-5"], "tile_size"),
-     (["--buffer", "-1"], "buffer"), (["--tile-size", "10", "--buffer", "80"], "buffer"), (["--voxel", "0"], "voxel")],
+     (["--buffer", "-1"], "buffer"), (["--tile-size", "10", "--buffer", "80"], "buffer"), (["--voxel", "0"], "voxel"),
+     (["--units", "furlong"], "units"), (["--units", "-0.3"], "units")],
 )
 def test_bad_parameters(scan_file, tmp_path, capsys, args, needle):
     _fails(capsys, ["ingest", str(scan_file), "--store", str(tmp_path / "s"), "--scheduler", "sync",
@@ -346,3 +348,57 @@ def test_cli_default_thread_cluster_gives_the_same_store(scan_file, tmp_path):
     for t in a:
         for name in a[t]:
             assert np.array_equal(a[t][name], b[t][name]), (t, name)
+
+
+def _copy_in(src: Path, out: Path, metres_per_unit: float, crs: str | None) -> None:
+    """``src`` with its coordinates in another unit (and that CRS recorded)."""
+    import pyproj
+
+    las = laspy.read(src)
+    x, y, z = (np.asarray(las.x) / metres_per_unit, np.asarray(las.y) / metres_per_unit,
+               np.asarray(las.z) / metres_per_unit)
+    with warnings.catch_warnings():  # the old coordinates overflow the new offsets' int32 until replaced
+        warnings.simplefilter("ignore", RuntimeWarning)
+        las.change_scaling(offsets=np.asarray(las.header.offsets) / metres_per_unit)
+    las.x, las.y, las.z = x, y, z
+    if crs:
+        las.header.add_crs(pyproj.CRS(crs))
+    las.write(out)
+
+
+def test_a_scan_in_feet_is_ingested_in_metres(scan_file, tmp_path):
+    """The CRS's linear unit (US survey feet here) converts the coordinates: the store
+    holds the metres of the same scan ingested in metres, tiled alike; ``units`` names it
+    without a CRS, and overrides one."""
+    ft = 1200 / 3937
+    _copy_in(scan_file, tmp_path / "ft.las", ft, "EPSG:2227")  # NAD83 / California zone 3 (ftUS)
+    _copy_in(scan_file, tmp_path / "bare.las", ft, None)
+    _ingest([scan_file], tmp_path / "m")
+    _ingest([tmp_path / "ft.las"], tmp_path / "f")
+    _ingest([tmp_path / "bare.las"], tmp_path / "b", units="us-ft")
+    _ingest([tmp_path / "bare.las"], tmp_path / "raw")  # no CRS, no units: taken as metres
+
+    def metres(name: str) -> tuple[np.ndarray, dict]:
+        st = RunStore.open(tmp_path / name)
+        c = st.attrs["coords"]
+        tiles = list(_tiles(tmp_path / name).values())
+        pts = np.concatenate([t["xyz"][t["core"]] * np.asarray(c["scale"]) + np.asarray(c["offset"]) for t in tiles])
+        idx = np.concatenate([t["index"][t["core"]] for t in tiles])
+        return pts[np.argsort(idx)], st.attrs
+
+    ref, ref_attrs = metres("m")
+    for name in ("f", "b"):
+        got, attrs = metres(name)
+        assert np.abs(got - ref).max() < 2e-3
+        assert attrs["grid"]["tile_size"] == ref_attrs["grid"]["tile_size"]
+        assert attrs["coords"]["metres_per_unit"] == pytest.approx([ft] * 3)
+    assert "US survey foot" in RunStore.open(tmp_path / "f").attrs["coords"]["unit"]
+    raw, _ = metres("raw")
+    assert np.ptp(raw[:, 2]) == pytest.approx(np.ptp(ref[:, 2]) / ft, rel=1e-3)
+
+
+def test_a_scan_in_degrees_is_one_line(scan_file, tmp_path, capsys):
+    _copy_in(scan_file, tmp_path / "deg.las", 1.0, "EPSG:4326")
+    _fails(capsys, ["ingest", str(tmp_path / "deg.las"), "--store", str(tmp_path / "s"), "--scheduler", "sync",
+                    "--no-progress"], "coordinates in degrees")
+    assert not (tmp_path / "s").exists()

@@ -371,3 +371,33 @@ def test_labels_task_reads_each_kept_part_about_once(tmp_path, scan, monkeypatch
     assert n_dropped > 4
     assert n_kept > 4
     assert len(loads) <= n_kept + n_dropped
+
+
+def test_tree_device_auto_on_a_cpu_machine_gives_the_cpu_labels(tmp_path, scan, shallow, monkeypatch):
+    """``tree.device: auto`` runs HollowNet on the CPU where torch sees no GPU, with the
+    labels of ``cpu``; the device is not a parameter of the result (a rerun with another
+    device redoes nothing), and ``cuda`` without a GPU is refused before anything runs."""
+    import shutil
+
+    import torch
+
+    import pipeline.tree_stage
+    from tiling.errors import ConfigError
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    seen: list[str] = []
+    get = pipeline.tree_stage._device
+    monkeypatch.setattr(pipeline.tree_stage, "_device", lambda d: seen.append(get(d)) or seen[-1])
+    _, want = shallow
+    _, got = _run(tmp_path / "a", scan, tree=SHALLOW[:-1] + ", device: auto}")
+    assert seen
+    assert set(seen) == {"cpu"}
+    for k in LABEL_DTYPES:
+        np.testing.assert_array_equal(got[k], want[k], err_msg=k)
+    seen.clear()
+    _run(tmp_path / "a", scan, tree=SHALLOW[:-1] + ", device: cpu}")
+    assert seen == []  # nothing redone
+    shutil.rmtree(tmp_path / "b", ignore_errors=True)
+    with pytest.raises(ConfigError, match="tree.device is cuda but torch sees no CUDA device"):
+        _run(tmp_path / "b", scan, tree=SHALLOW[:-1] + ", device: cuda}")
+    assert not (tmp_path / "b" / "s.zarr").exists()

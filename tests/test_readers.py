@@ -606,3 +606,21 @@ def test_an_empty_crs_vlr_is_no_crs_in_ingest_and_export(tmp_path, source, caplo
     assert header.parse_crs() is None
     assert any("CRS VLR could not be parsed" in r.getMessage() and str(path) in r.getMessage()
                for r in caplog.records)
+
+
+def test_autzen_in_feet_runs_in_metres_and_is_called_sparse(tmp_path):
+    """A real scan in feet (its CRS says so): the run converts to metres, says so, and
+    warns that an airborne scan this sparse is outside what the method is made for."""
+    import subprocess
+    import sys
+
+    path = external("pdal/autzen_trim.laz")
+    wf = tmp_path / "wf.yaml"
+    wf.write_text(f"input: {{files: [{path}]}}\nstore: {tmp_path / 's.zarr'}\ntree: {{enabled: false}}\n"
+                  "cluster: {scheduler: sync}\n")
+    r = subprocess.run([sys.executable, "-m", "pipeline.cli", "run", str(wf), "--no-progress"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "input coordinates in foot (0.3048 m, from the CRS)" in r.stdout
+    assert "m apart" in r.stderr
+    assert "made for terrestrial scans" in r.stderr

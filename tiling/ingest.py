@@ -16,6 +16,7 @@ set by ``chunk_size`` (map) and the largest tile (reduce), never by the scan.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -33,7 +34,7 @@ from tiling.columns import column_max, column_min
 from tiling.errors import ConfigError, CorruptInputError
 from tiling.grid import TileGrid
 from tiling.kernels import morton_index_order, quantise, route_groups, split_rows
-from tiling.readers import PointBlock, SourceInfo, probe, read_blocks
+from tiling.readers import UNIT_METRES, PointBlock, SourceInfo, crs_units, probe, read_blocks
 from tiling.store import RunStore, StoreError, check_writable
 
 __all__ = [
@@ -92,6 +93,13 @@ class IngestParams:
         Ingest only these tile ids.
     chunk_size : int
         Records per map unit (sets the map phase's memory: about 150 bytes per record).
+    units : float, str or None
+        Metres per coordinate unit of the inputs, or a unit's name
+        (:data:`tiling.readers.UNIT_METRES`: ``m``, ``ft``, ``us-ft``, ...). None (the
+        default) takes the linear unit of the inputs' CRS (metres where they have none).
+        The store holds metres: every length parameter (here and in later stages) is in
+        metres whatever the input's unit; the exported scan keeps the input's own
+        coordinates. ``bbox`` is in the inputs' coordinates.
     """
 
     tile_size: float | None = None
@@ -101,6 +109,7 @@ class IngestParams:
     tiles: tuple[int, ...] | None = None
     chunk_size: int = 1_000_000
     tile_points: int = 2_000_000
+    units: float | str | None = None
 
     def __post_init__(self) -> None:
         def bad(name: str, rule: str, value: object) -> ConfigError:
@@ -131,11 +140,22 @@ class IngestParams:
             object.__setattr__(self, "tiles", tuple(sorted(set(t))))
         if not (isinstance(self.chunk_size, int) and self.chunk_size > 0):
             raise bad("chunk_size", "an int in the range [1, inf)", self.chunk_size)
+        if isinstance(self.units, str):
+            if self.units.lower() not in UNIT_METRES:
+                raise bad("units", f"metres per coordinate unit or one of {sorted(UNIT_METRES)}", self.units)
+            object.__setattr__(self, "units", UNIT_METRES[self.units.lower()])
+        elif self.units is not None and (isinstance(self.units, bool) or not isinstance(self.units, (int, float))
+                                         or not (math.isfinite(self.units) and self.units > 0)):
+            raise bad("units", f"metres per coordinate unit (> 0) or one of {sorted(UNIT_METRES)}", self.units)
+        elif self.units is not None:
+            object.__setattr__(self, "units", float(self.units))
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d["bbox"] = list(self.bbox) if self.bbox is not None else None
         d["tiles"] = list(self.tiles) if self.tiles is not None else None
+        if self.units is None:  # as stores made before the key recorded it
+            del d["units"]
         return d
 
     @classmethod
@@ -173,13 +193,19 @@ class IngestPlan:
     params: IngestParams
     units: tuple[MapUnit, ...] = field(repr=False)
     params_hash: str = ""
+    #: metres per input coordinate unit along x, y, z, and where that came from
+    metres_per_unit: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    unit_name: str = "metre (no CRS)"
 
     def attrs(self) -> dict[str, Any]:
         """The root attributes that describe this ingest."""
         return {
             "sources": [s.to_dict() for s in self.sources],
             "grid": self.grid.to_dict(),
-            "coords": {"dtype": "int32", "scale": list(self.scale), "offset": list(self.offset)},
+            "coords": {"dtype": "int32", "scale": list(self.scale), "offset": list(self.offset),
+                       # only where they are not metres: the identity of a store made before
+                       **({"metres_per_unit": list(self.metres_per_unit), "unit": self.unit_name}
+                          if self.metres_per_unit != (1.0, 1.0, 1.0) else {})},
             "fields": self.fields,
             "ingest": {"params": self.params.to_dict(), "params_hash": self.params_hash,
                        "tiles": list(self.tiles)},
@@ -258,6 +284,19 @@ def _fields(sources: Sequence[SourceInfo]) -> dict[str, list[Any]]:
     return out
 
 
+def _metres_per_unit(sources: Sequence[SourceInfo], params: IngestParams) -> tuple[np.ndarray, str]:
+    """Metres per input coordinate unit (x, y, z) and its description: ``params.units``,
+    else the inputs' CRS (their CRSs are one, checked before), else metres."""
+    if params.units is not None:
+        return np.full(3, float(params.units)), f"{params.units:g} m per unit (ingest.units)"
+    wkt = next((s.crs_wkt for s in sources if s.crs_wkt), None)
+    found = crs_units(wkt, next((s.path for s in sources if s.crs_wkt), ""))
+    if found is None:
+        return np.ones(3), "metre (no CRS)" if wkt is None else "metre (the CRS names no linear unit)"
+    f, name = found
+    return np.asarray(f, float), f"{name} ({f[0]:g} m, from the CRS)"
+
+
 def plan_ingest(inputs: Sequence[str | Path], params: IngestParams) -> IngestPlan:
     """Probe the inputs and fix the grid, the coordinate grid and the map units.
 
@@ -276,9 +315,10 @@ def plan_ingest(inputs: Sequence[str | Path], params: IngestParams) -> IngestPla
     for s in sources:
         if s.point_count == 0:
             raise CorruptInputError(f"{s.path}: holds no points")
+    f, unit_name = _metres_per_unit(sources, params)
     bounds = [_source_bounds(s, params.chunk_size) for s in sources]
-    lo = np.min([b[0] for b in bounds], axis=0)
-    hi = np.max([b[1] for b in bounds], axis=0)
+    lo = np.min([b[0] for b in bounds], axis=0) * f
+    hi = np.max([b[1] for b in bounds], axis=0) * f
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
         raise CorruptInputError(f"{sources[0].path}: no finite coordinates in the inputs")
     tile_size = params.tile_size
@@ -291,12 +331,12 @@ def plan_ingest(inputs: Sequence[str | Path], params: IngestParams) -> IngestPla
 
     las = [s for s in sources if s.scale is not None]
     scale = np.full(3, FLOAT_SOURCE_SCALE)
-    if las:
-        scale = np.min([np.asarray(s.scale, float) for s in las], axis=0)
+    if las:  # the inputs' own integer grid, in metres
+        scale = np.min([np.asarray(s.scale, float) for s in las], axis=0) * f
         if any(s.scale is None for s in sources):
             scale = np.minimum(scale, FLOAT_SOURCE_SCALE)
     if las and las[0].offset is not None:
-        offset = np.asarray(las[0].offset, float)
+        offset = np.asarray(las[0].offset, float) * f
     else:
         offset = np.floor(lo)
     span = np.maximum(np.abs(hi - offset), np.abs(lo - offset)) / scale
@@ -313,7 +353,7 @@ def plan_ingest(inputs: Sequence[str | Path], params: IngestParams) -> IngestPla
             )
         all_tiles = np.asarray(params.tiles)
     if params.bbox is not None:
-        xmin, ymin, xmax, ymax = params.bbox
+        xmin, ymin, xmax, ymax = (v * f[i % 2] for i, v in enumerate(params.bbox))
         keep = []
         for t in all_tiles:
             x0, y0, x1, y1 = grid.core_bounds(int(t))
@@ -333,7 +373,7 @@ def plan_ingest(inputs: Sequence[str | Path], params: IngestParams) -> IngestPla
     plan = IngestPlan(
         sources=sources, grid=grid, scale=tuple(scale.tolist()), offset=tuple(offset.tolist()),
         tiles=tuple(int(t) for t in all_tiles), fields=_fields(sources), params=params,
-        units=tuple(units),
+        units=tuple(units), metres_per_unit=tuple(float(v) for v in f), unit_name=unit_name,
     )
     identity = {k: v for k, v in plan.attrs().items() if k != "ingest"}
     identity["params"] = params.to_dict()
@@ -393,6 +433,9 @@ def map_chunk(url: str, unit: MapUnit, plan_attrs: dict[str, Any]) -> dict[str, 
     blocks = list(read_blocks(unit.path, chunk_size=unit.stop - unit.start, start=unit.start, stop=unit.stop))
     n_dropped = sum(b.n_dropped for b in blocks)
     block = blocks[0] if len(blocks) == 1 else PointBlock.concat(blocks)
+    f = np.asarray(plan_attrs["coords"].get("metres_per_unit", (1.0, 1.0, 1.0)), dtype=np.float64)
+    if np.any(f != 1.0):  # the store holds metres
+        block = dataclasses.replace(block, xyz=block.xyz * f)
     counts: dict[str, int] = {}
     if len(block):
         ex, ey = grid.edges()

@@ -55,7 +55,7 @@ from tiling.errors import (
     UnsupportedInputError,
 )
 
-__all__ = ["SourceInfo", "PointBlock", "las_crs", "probe", "read_blocks", "SUFFIXES"]
+__all__ = ["SourceInfo", "PointBlock", "UNIT_METRES", "crs_units", "las_crs", "probe", "read_blocks", "SUFFIXES"]
 
 logger = logging.getLogger(__name__)
 
@@ -333,6 +333,59 @@ def las_crs(header: laspy.LasHeader, path: str | Path) -> Any:
     except Exception as e:  # pyproj's CRSError, laspy's errors: a broken VLR is not a reason to stop  # noqa: BLE001
         logger.warning("%s: CRS VLR could not be parsed (%s); taken as no CRS", path, e)
         return None
+
+
+#: Metres per unit of the linear units a user may name (``ingest.units``, ``--units``).
+UNIT_METRES = {"m": 1.0, "metre": 1.0, "meter": 1.0, "cm": 0.01, "mm": 0.001,
+               "ft": 0.3048, "foot": 0.3048, "us-ft": 1200 / 3937, "us_survey_foot": 1200 / 3937}
+
+
+def crs_units(wkt: str | None, path: str | Path = "") -> tuple[tuple[float, float, float], str] | None:
+    """Metres per coordinate unit along x, y and z, and the unit's name, from a CRS's WKT;
+    None where there is no CRS, it cannot be read (a warning) or names no linear unit.
+    z takes the vertical CRS's unit where the CRS is compound, else the horizontal one.
+
+    Raises
+    ------
+    ConfigError
+        If the horizontal CRS is geographic (coordinates in degrees): the method's
+        parameters are lengths.
+
+    Examples
+    --------
+    >>> crs_units('PROJCS["x",GEOGCS["g",DATUM["d",SPHEROID["s",6378137,298.257]],PRIMEM["G",0],'
+    ...           'UNIT["degree",0.0174532925199433]],PROJECTION["Transverse_Mercator"],UNIT["foot",0.3048]]')
+    ((0.3048, 0.3048, 0.3048), 'foot')
+    >>> crs_units(None) is None
+    True
+    """
+    if not wkt:
+        return None
+    try:
+        import pyproj
+
+        crs = pyproj.CRS.from_wkt(wkt)
+    except Exception as e:  # pyproj's CRSError and friends: an unreadable CRS is no CRS  # noqa: BLE001
+        logger.warning("%s: CRS could not be read (%s); coordinates taken as metres", path or "input", e)
+        return None
+    subs = crs.sub_crs_list if crs.is_compound else [crs]
+    horizontal = next((c for c in subs if not c.is_vertical), None)
+    vertical = next((c for c in subs if c.is_vertical), None)
+    if horizontal is not None and horizontal.is_geographic:
+        raise ConfigError(f"{path or 'input'}: coordinates in degrees ({horizontal.name}); reproject the scan "
+                          "to a projected CRS in metres or feet first, or name its units with --units")
+
+    def linear(c: Any) -> tuple[float, str] | None:
+        axes = [a for a in (c.axis_info if c is not None else []) if a.unit_conversion_factor]
+        if not axes or (axes[0].unit_name or "").lower() in ("degree", "radian", "grad"):
+            return None
+        return float(axes[0].unit_conversion_factor), str(axes[0].unit_name)
+
+    h = linear(horizontal)
+    if h is None:
+        return None
+    v = linear(vertical) or h
+    return (h[0], h[0], v[0]), h[1]
 
 
 def _probe_las(p: Path) -> SourceInfo:
