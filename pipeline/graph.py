@@ -441,14 +441,24 @@ def _client_runner(client_of: Callable[[], Any], progress: bool) -> Runner:
 
 @contextlib.contextmanager
 def task_runner(
-    scheduler: str | None = None, *, workers: int = 2, progress: bool = True, processes: bool = True
+    scheduler: str | None = None, *, workers: int = 2, progress: bool = True, processes: bool = True,
+    client: Any = None,
 ) -> Iterator[Runner]:
     """Context manager yielding a runner on the chosen scheduler (see module notes).
+
+    ``client``: a ``distributed.Client`` the caller made (a notebook's, one of a
+    dask-jobqueue or dask-kubernetes cluster): its cluster runs the tasks and stays open
+    after the block; ``scheduler`` and ``workers`` are then not used.
 
     ``processes=False`` makes the local cluster (``scheduler=None``) one of ``workers``
     threads in this process: it starts in milliseconds instead of about 1.5 s, for stages
     whose tasks spend their time in code that releases the GIL (the ingest's).
     """
+    if client is not None:
+        if progress:
+            print(f"dask dashboard: {client.dashboard_link}", file=sys.stderr)
+        yield _client_runner(lambda: client, progress)
+        return
     if scheduler == "sync":
         yield _sync_runner(progress)
         return

@@ -141,9 +141,14 @@ def _remove_if_empty(folder: Path) -> None:
 
 
 def run_workflow(
-    wf: Workflow, *, progress: bool = True, say: Callable[[str], None] = print,
+    wf: Workflow, *, progress: bool = True, say: Callable[[str], None] = print, client: Any = None,
 ) -> RunReport:
-    """Run every stage of ``wf`` (resuming what the store already records)."""
+    """Run every stage of ``wf`` (resuming what the store already records).
+
+    ``client``: an existing ``distributed.Client`` (a notebook's, a dask-jobqueue or
+    dask-kubernetes cluster's) to run the tasks on instead of ``wf.cluster``; it stays
+    open. Its workers must import hollowtree and reach the store and the inputs.
+    """
     from pipeline.coarse import CoarseParams, run_coarse
     from pipeline.graph import fresh_workers, task_runner
     from pipeline.labels import run_labels
@@ -156,7 +161,7 @@ def run_workflow(
     url = wf.store
     report = RunReport(store=url)
     check_writable(url)
-    if wf.tree.enabled and wf.tree.device == "cuda" and wf.cluster.scheduler in (None, "sync"):
+    if wf.tree.enabled and wf.tree.device == "cuda" and client is None and wf.cluster.scheduler in (None, "sync"):
         import torch  # the workers are this machine's: say so before anything runs
 
         if not torch.cuda.is_available():
@@ -198,9 +203,9 @@ def run_workflow(
             if redo:
                 say(f"parameters changed ({'; '.join(diffs)}): redoing {', '.join(redo)}")
             scheduler = wf.cluster.scheduler
-            if scheduler is None and _input_points(wf) < wf.cluster.in_process_below:
+            if client is None and scheduler is None and _input_points(wf) < wf.cluster.in_process_below:
                 scheduler = "sync"  # a small scan: starting a cluster would take longer than its tasks
-            with task_runner(scheduler, workers=wf.cluster.workers, progress=progress) as runner:
+            with task_runner(scheduler, workers=wf.cluster.workers, progress=progress, client=client) as runner:
                 with timed_stage(url, "ingest", runner):
                     rep = ingest([str(p) for p in wf.input.paths()], url, ingest_params, runner=runner,
                                  replace="ingest" in redo)

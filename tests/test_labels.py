@@ -401,3 +401,24 @@ def test_tree_device_auto_on_a_cpu_machine_gives_the_cpu_labels(tmp_path, scan, 
     with pytest.raises(ConfigError, match="tree.device is cuda but torch sees no CUDA device"):
         _run(tmp_path / "b", scan, tree=SHALLOW[:-1] + ", device: cuda}")
     assert not (tmp_path / "b" / "s.zarr").exists()
+
+
+def test_an_existing_client_runs_the_workflow_and_stays_open(tmp_path, scan, shallow):
+    """``run_workflow(wf, client=...)``: a notebook's Client (here of a LocalCluster of
+    threads) runs the tasks instead of the workflow's cluster, with the same labels, and
+    is still usable afterwards."""
+    from distributed import Client, LocalCluster
+
+    wf_path = tmp_path / "wf.yaml"
+    wf_path.write_text(f"input: {{files: [{scan}]}}\nstore: {tmp_path / 's.zarr'}\ningest: {{tile_size: 50.0}}\n"
+                       f"coarse: {{min_support: 300}}\ntree: {SHALLOW}\ncluster: {{scheduler: sync}}\n")
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=":0") as cluster, \
+            Client(cluster) as client:
+        run_workflow(load_workflow(wf_path), progress=False, say=lambda _: None, client=client)
+        assert client.submit(sum, [1, 2]).result() == 3
+        prefixes = set(client.run_on_scheduler(lambda dask_scheduler: list(dask_scheduler.task_prefixes)))
+    assert {"map_chunk", "tree_batch", "labels_range"} <= prefixes  # its workers ran the stages
+    store = RunStore.open(tmp_path / "s.zarr")
+    _, want = shallow
+    for k in LABEL_DTYPES:
+        np.testing.assert_array_equal(store.read_slice(f"labels/{k}"), want[k], err_msg=k)
