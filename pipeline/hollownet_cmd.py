@@ -145,22 +145,16 @@ def procedural_samples(site_seed: int, n_points: int, cache: Path, *, seed: int,
     import tempfile
 
     from hollownet.dataset import labelled_samples
-    from scenes.procedural import SPLITS, scan_draw
-    from scenes.synth import synth
+    from pipeline.split_fit import check_training_seed, scan_training_site
 
-    lo, hi = SPLITS["train"]
-    if not lo <= site_seed < hi:
-        raise ConfigError(f"procedural seed {site_seed} is not a training seed ({lo}-{hi - 1}): HollowNet is "
-                          "trained on training seeds only")
+    check_training_seed(site_seed, "HollowNet is trained")
     name = f"gen-{site_seed}-{n_points}.laz"
     out = cache / "procedural" / f"samples-{site_seed}-{n_points}-s{seed}-v{variants}.npz"
     if not out.is_file():
         out.parent.mkdir(parents=True, exist_ok=True)
-        d = scan_draw(site_seed)
         with tempfile.TemporaryDirectory(dir=out.parent) as tmp:
             laz = Path(tmp) / name
-            synth("gen", laz, n_points=n_points, seed=site_seed, noise=d.noise,
-                  registration_error=d.registration_error, overwrite=True, workers=2)
+            scan_training_site(site_seed, laz, n_points)
             xyz, _, cls, inst = read_labelled(laz, "gt_class", "gt_instance")
         tr, te = labelled_samples(xyz, cls, inst, seed=seed, variants=variants, source=name)
         tmp_out = out.with_suffix(".tmp.npz")

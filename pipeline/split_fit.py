@@ -99,6 +99,30 @@ def training_groups(i: int, work: Path) -> Path:
     return out
 
 
+def check_training_seed(seed: int, what: str) -> None:
+    """Raise a ConfigError unless ``seed`` is a training seed of ``scenes.procedural``
+    (``what``: the learned part, e.g. "HollowNet is trained")."""
+    from scenes.procedural import SPLITS
+    from tiling.errors import ConfigError
+
+    lo, hi = SPLITS["train"]
+    if not lo <= seed < hi:
+        raise ConfigError(f"procedural seed {seed} is not a training seed ({lo}-{hi - 1}): {what} on training "
+                          "seeds only")
+
+
+def scan_training_site(seed: int, out: Path, n_points: int) -> None:
+    """Scan procedural training site ``seed`` to ``out`` at about ``n_points`` points,
+    with the seed's own noise and registration error."""
+    from scenes.procedural import scan_draw
+    from scenes.synth import synth
+
+    check_training_seed(seed, "learned parts are fitted")
+    d = scan_draw(seed)
+    synth("gen", out, n_points=n_points, seed=seed, noise=d.noise, registration_error=d.registration_error,
+          overwrite=True, workers=2)
+
+
 def procedural_groups(seed: int, work: Path, *, n_points: int = 600_000) -> Path:
     """The element groups of the procedural site of training seed ``seed``, scanned at
     about ``n_points`` points with the seed's own noise and registration error.
@@ -108,21 +132,14 @@ def procedural_groups(seed: int, work: Path, *, n_points: int = 600_000) -> Path
     ConfigError
         If ``seed`` is not a training seed (``scenes.procedural.SPLITS["train"]``).
     """
-    from scenes.procedural import SPLITS, scan_draw
-    from scenes.synth import sidecar_path, synth
-    from tiling.errors import ConfigError
+    from scenes.synth import sidecar_path
 
-    lo, hi = SPLITS["train"]
-    if not lo <= seed < hi:
-        raise ConfigError(f"procedural seed {seed} is not a training seed ({lo}-{hi - 1}): the split model is "
-                          "fitted on training seeds only")
+    check_training_seed(seed, "the split model is fitted")
     out = work / f"groups-gen-{seed}-{n_points}.npz"
     if out.exists():
         return out
     laz = work / f"gen-{seed}.laz"
-    d = scan_draw(seed)
-    synth("gen", laz, n_points=n_points, seed=seed, noise=d.noise, registration_error=d.registration_error,
-          overwrite=True, workers=2)
+    scan_training_site(seed, laz, n_points)
     _groups_of_scan(laz, work, out, f"gen-{seed}", _synthetic_gt(laz))
     laz.unlink()
     sidecar_path(laz).unlink(missing_ok=True)
