@@ -318,8 +318,8 @@ def fresh_workers(runner: Runner) -> None:
     its own working set, and the ingest's and coarse stage's heaps are not all handed back
     by ``malloc_trim`` (a coarse task peaked 70-120 MB higher, a tree task 150-250 MB
     higher, in workers that had run the stage before; docs/benchmarks.md, "End to end").
-    ``hollowtree run`` calls it after every stage that ran tasks. Takes about 1.2 s
-    (new worker processes under the same scheduler, :class:`_LocalClient`).
+    ``hollowtree run`` calls it after every stage that ran tasks. Takes 1.1-1.4 s
+    (a new local cluster, :class:`_LocalClient`).
     """
     restart = getattr(runner, "restart_workers", None)
     if restart is not None:
@@ -327,18 +327,16 @@ def fresh_workers(runner: Runner) -> None:
 
 
 class _LocalClient:
-    """A local cluster of this command and its client; :meth:`renew` replaces its worker
-    processes, so the next stage runs in new ones.
+    """A local cluster of this command and its client; :meth:`renew` replaces both, so the
+    next stage runs in new worker processes.
 
-    The workers are scaled to none and back (new processes, about 1.1-1.2 s), the
-    scheduler stays: its dashboard address, printed once when the run starts, stays
-    alive to the end. Not ``client.restart()``: a nanny restart once left a run waiting
-    120 s for workers that never came back. Should new workers not come within
-    ``RENEW_TIMEOUT`` seconds, the whole cluster is replaced (a warning names its new
-    dashboard address).
+    A new cluster rather than new workers under the same scheduler: a nanny restart
+    (``client.restart()``) once left a run waiting 120 s for workers that never came
+    back, and scaling the workers to none and back raced the cluster's own bookkeeping
+    (a ``KeyError`` in ``SpecCluster._update_worker_status`` when the cluster closed;
+    dask/distributed#5407, #5919). Closing a cluster and starting one takes about as
+    long (1.1-1.3 s). Its dashboard address changes with it.
     """
-
-    RENEW_TIMEOUT = 60.0
 
     def __init__(self, workers: int, processes: bool) -> None:
         self.workers, self.processes = workers, processes
@@ -355,20 +353,8 @@ class _LocalClient:
         self.client = Client(self.cluster)
 
     def renew(self) -> None:
-        try:
-            self.cluster.scale(0)
-            end = time.monotonic() + self.RENEW_TIMEOUT
-            while self.client.scheduler_info()["workers"]:
-                if time.monotonic() > end:
-                    raise TimeoutError("old workers did not leave")
-                time.sleep(0.02)
-            self.cluster.scale(self.workers)
-            self.client.wait_for_workers(self.workers, timeout=self.RENEW_TIMEOUT)
-        except (TimeoutError, OSError) as exc:
-            self.close()
-            self._start()
-            logger.warning("new workers did not start (%s); a new local cluster, dashboard %s", exc,
-                           self.client.dashboard_link)
+        self.close()
+        self._start()
 
     def close(self) -> None:
         try:
