@@ -6,7 +6,10 @@
   (float32) and ``primitive_id`` (uint8) read from the store's label arrays, and the LAS
   ``classification`` set by :data:`LAS_CLASSIFICATION`. The output is LAS 1.4 with a
   point format of 6 or above (formats 0-5 are upgraded: their 5-bit classification
-  cannot hold the element codes). Records of PLY/E57 inputs with non-finite coordinates
+  cannot hold the element codes). The input's extra dimensions keep their stored values,
+  scales, offsets and descriptions; its own VLRs, its GPS time type and (as
+  ``input_classification``) its classification are kept; a classification lookup VLR
+  names the codes. Records of PLY/E57 inputs with non-finite coordinates
   were dropped at ingest and are not exported (the ingest reported their count).
 * :func:`export_parquet` copies the segment and tree tables.
 * :func:`export_png` draws a top and a side view of a sample of the labelled points,
@@ -26,13 +29,14 @@ from typing import Any
 
 import laspy
 import numpy as np
+from laspy.vlrs.known import ClassificationLookupVlr
 
 from tiling.classes import CLASS_NAMES, NUM_CLASSES, ClassId
 from tiling.errors import ConfigError, PipelineError
 from tiling.readers import las_crs, read_blocks
 from tiling.store import RunStore
 
-__all__ = ["LAS_CLASSIFICATION", "CLASS_COLOURS", "export_las", "export_parquet", "export_png", "write_outputs"]
+__all__ = ["INPUT_CLASSIFICATION", "LAS_CLASSIFICATION", "CLASS_COLOURS", "export_las", "export_parquet", "export_png", "write_outputs"]
 
 #: LAS classification written for each hollowtree class: ASPRS codes where one exists
 #: (1 unclassified, 2 ground, 6 building), user-definable codes 64-67 for the elements.
@@ -50,6 +54,9 @@ _EXTRA = (("class_id", np.uint8, "class"), ("instance_id", np.uint32, "instance"
           ("segment_id", np.uint64, "segment"), ("score", np.float32, "score"),
           ("primitive_id", np.uint8, "primitive"))
 _UPGRADE = {0: 6, 1: 6, 2: 7, 3: 7, 4: 9, 5: 10}
+#: The extra dimension that keeps a LAS input's own classification (``classification``
+#: holds the labels).
+INPUT_CLASSIFICATION = "input_classification"
 _CHUNK = 1_000_000
 
 
@@ -72,11 +79,21 @@ def _out_header(sources: list[dict[str, Any]]) -> laspy.LasHeader:
         pf = _UPGRADE.get(src.point_format.id, src.point_format.id)
         header = laspy.LasHeader(point_format=pf, version="1.4")
         header.scales, header.offsets = src.scales, src.offsets
-        for dim in src.point_format.extra_dimensions:
-            header.add_extra_dim(laspy.ExtraBytesParams(name=dim.name, type=dim.dtype))
+        header.global_encoding.gps_time_type = src.global_encoding.gps_time_type
+        for dim in src.point_format.extra_dimensions:  # raw type, scale, offset and description
+            header.add_extra_dim(laspy.ExtraBytesParams(
+                name=dim.name, type=dim.dtype if dim.num_elements == 1 else f"{dim.num_elements}{dim.dtype.base}",
+                description=dim.description or "", scales=dim.scales, offsets=dim.offsets))
+        # the user's own records, not those this writer makes (CRS, extra bytes, class names)
+        header.vlrs.extend(v for v in src.vlrs if not _remade(v))
+        header.evlrs = [v for v in (src.evlrs or []) if not _remade(v)] or None
         crs = las_crs(src, first["path"])
         if crs is not None:
             header.add_crs(crs)
+        if "classification" in src.point_format.dimension_names and \
+                INPUT_CLASSIFICATION not in src.point_format.dimension_names:
+            header.add_extra_dim(laspy.ExtraBytesParams(
+                name=INPUT_CLASSIFICATION, type=np.uint8, description="classification of the input"))
     else:
         header = laspy.LasHeader(point_format=7, version="1.4")
         header.scales = np.array([0.001, 0.001, 0.001])
@@ -86,7 +103,18 @@ def _out_header(sources: list[dict[str, Any]]) -> laspy.LasHeader:
         if name in taken:
             raise ConfigError(f"input {sources[0]['path']} already has a dimension {name!r}; cannot export labels")
         header.add_extra_dim(laspy.ExtraBytesParams(name=name, type=dt))
+    lookup = ClassificationLookupVlr()  # names the codes for viewers that read LAS 1.4's lookup
+    for c, code in LAS_CLASSIFICATION.items():
+        lookup.lookups[code] = {1: "unclassified", 2: "ground", 6: "building"}.get(code, CLASS_NAMES[c])
+    header.vlrs.append(lookup)
     return header
+
+
+def _remade(vlr: Any) -> bool:
+    """A VLR the exported file gets anew: the CRS, the extra-bytes description, the
+    classification lookup."""
+    uid, rid = getattr(vlr, "user_id", ""), getattr(vlr, "record_id", -1)
+    return uid == "LASF_Projection" or (uid == "LASF_Spec" and rid in (0, 4)) or uid == "laszip encoded"
 
 
 def _labels(store: RunStore, index: np.ndarray) -> dict[str, np.ndarray]:
@@ -121,13 +149,18 @@ def export_las(store: RunStore, out: str | Path, *, progress: bool = False) -> i
             if s.get("format") in ("las", "laz", "copc"):
                 with laspy.open(s["path"]) as r:
                     names = set(r.header.point_format.dimension_names)
+                    extra = set(r.header.point_format.extra_dimension_names) & set(header.point_format.dimension_names)
                     start = 0
                     for chunk in r.chunk_iterator(_CHUNK):
                         rec = laspy.ScaleAwarePointRecord.zeros(len(chunk), header=header)
                         rec.x, rec.y, rec.z = chunk.x, chunk.y, chunk.z
                         for name in header.point_format.dimension_names:
-                            if name in names and name not in ("X", "Y", "Z", "classification"):
+                            if name in extra:  # stored values, as they are: no rescaling
+                                rec.array[name] = chunk.array[name]
+                            elif name in names and name not in ("X", "Y", "Z", "classification"):
                                 rec[name] = chunk[name]
+                        if INPUT_CLASSIFICATION in header.point_format.dimension_names and "classification" in names:
+                            rec[INPUT_CLASSIFICATION] = np.asarray(chunk.classification, dtype=np.uint8)
                         index = np.arange(base + start, base + start + len(chunk), dtype=np.int64)
                         _fill(rec, store, index, mapping)
                         writer.write_points(rec)

@@ -422,3 +422,37 @@ def test_an_existing_client_runs_the_workflow_and_stays_open(tmp_path, scan, sha
     _, want = shallow
     for k in LABEL_DTYPES:
         np.testing.assert_array_equal(store.read_slice(f"labels/{k}"), want[k], err_msg=k)
+
+
+def test_export_keeps_the_users_data(tmp_path, scan):
+    """The labelled LAZ keeps what the input held: scaled extra dimensions to the stored
+    value, their descriptions, the user's own VLRs, the GPS time type and the input's
+    classification (in ``input_classification``); the class codes are named."""
+    import laspy
+    from laspy.vlrs.known import ClassificationLookupVlr
+
+    from pipeline.export import INPUT_CLASSIFICATION, LAS_CLASSIFICATION
+
+    las = laspy.read(scan)
+    las.header.global_encoding.gps_time_type = laspy.header.GpsTimeType.STANDARD
+    las.add_extra_dim(laspy.ExtraBytesParams(name="reflectance", type=np.int16, scales=np.array([0.01]),
+                                             offsets=np.array([0.0]), description="reflectance dB"))
+    rng = np.random.default_rng(0)
+    las.reflectance = np.round(rng.uniform(-20, 5, len(las.points)), 2)
+    las.classification = rng.integers(0, 20, len(las.points)).astype(np.uint8)
+    las.header.vlrs.append(laspy.VLR(user_id="SurveyOffice", record_id=7, description="station list",
+                                     record_data=b"station 1; station 2"))
+    src = tmp_path / "user.laz"
+    las.write(src)
+    out = tmp_path / "labelled.laz"
+    _run(tmp_path / "r", src, extra=f"outputs: {{las: {out}}}\n")
+    got = laspy.read(out)
+    np.testing.assert_array_equal(np.asarray(got.reflectance), np.asarray(las.reflectance))  # -4.08 stays -4.08
+    dim = next(d for d in got.point_format.extra_dimensions if d.name == "reflectance")
+    assert dim.description == "reflectance dB"
+    assert any(v.user_id == "SurveyOffice" and v.record_data == b"station 1; station 2" for v in got.header.vlrs)
+    assert got.header.global_encoding.gps_time_type == laspy.header.GpsTimeType.STANDARD
+    np.testing.assert_array_equal(np.asarray(got[INPUT_CLASSIFICATION]), np.asarray(las.classification))
+    lookup = next(v for v in got.header.vlrs if isinstance(v, ClassificationLookupVlr))
+    assert lookup.lookups[LAS_CLASSIFICATION[ClassId.DOME]] == "dome"
+    assert lookup.lookups[2] == "ground"
