@@ -333,6 +333,14 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--no-progress", action="store_true", help="no progress bars")
     ev.set_defaults(func=_cmd_evaluate)
 
+    it = sub.add_parser("init", help="write the example workflows into a folder, to edit and run",
+                        description="Copy the shipped example workflows (local.yaml: the whole pipeline on "
+                                    "this machine; laptop.yaml: one downsampled tile; cluster.yaml: a Dask "
+                                    "cluster and an object store) and their JSON schema into DIR.")
+    it.add_argument("dir", type=Path, help="folder to write them into (made if missing)")
+    it.add_argument("--overwrite", action="store_true", help="replace files of the same names")
+    it.set_defaults(func=_cmd_init)
+
     st = sub.add_parser("status", help="per stage: units done / total and the parameters used",
                         description="Show what a run store holds: per stage, units done / total and parameters.")
     st.add_argument("store", help="run store")
@@ -482,6 +490,25 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     evaluate_inputs(args.inputs, workflow=args.workflow, overrides=overrides, store_dir=args.store_dir,
                     json_path=args.json, png_dir=args.png_dir, seeds=args.seeds, progress=not args.no_progress,
                     say=lambda line: print(line, flush=True))
+    return 0
+
+
+def _cmd_init(args: argparse.Namespace) -> int:
+    import shutil
+
+    from pipeline.workflow import shipped_workflows
+    from tiling.errors import ConfigError, OutputExistsError
+
+    src = sorted(p for p in shipped_workflows().iterdir() if p.suffix in (".yaml", ".json"))
+    if args.dir.exists() and not args.dir.is_dir():
+        raise ConfigError(f"{args.dir}: exists and is not a folder")
+    clash = [p.name for p in src if (args.dir / p.name).exists()]
+    if clash and not args.overwrite:
+        raise OutputExistsError(f"{args.dir}: {', '.join(clash)} exist; pass --overwrite to replace them")
+    args.dir.mkdir(parents=True, exist_ok=True)
+    for p in src:
+        shutil.copyfile(p, args.dir / p.name)
+    print(f"{args.dir}: {', '.join(p.name for p in src)}; run one with `hollowtree run {args.dir / 'local.yaml'}`")
     return 0
 
 

@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.labels import LEAF_BITS
+from pipeline.workflow import shipped_workflows
 from scenes.metrics import Evaluation, LabelCounts, count_labels, score_counts
 from tiling.classes import ELEMENT_CLASSES
 from tiling.errors import ConfigError, InputFileError, PipelineError
@@ -52,7 +53,7 @@ __all__ = ["METHODS", "GT_DIMS", "DEFAULT_WORKFLOW", "SiteResult", "evaluate_inp
 #: The three methods, in the order of the paper's Fig. 1 (b), (c), (d).
 METHODS = ("ransac", "ransac+dbscan", "tree")
 GT_DIMS = ("gt_class", "gt_instance")
-DEFAULT_WORKFLOW = Path(__file__).resolve().parents[1] / "workflows" / "local.yaml"
+DEFAULT_WORKFLOW = shipped_workflows() / "local.yaml"
 _CHUNK = 1_000_000
 #: Largest segment handed to HollowNet whole; bigger ones are classified from a seeded
 #: random subset of this many points (its hollow-voxel grid hardly changes).

@@ -24,6 +24,7 @@ import laspy
 import numpy as np
 import yaml
 
+from pipeline.workflow import shipped_workflows
 from scenes.fuzz import FuzzSpec, fuzz_points
 from tiling.classes import NUM_CLASSES
 from tiling.errors import PipelineError
@@ -32,7 +33,7 @@ __all__ = ["DEFAULT_WORKFLOW", "FuzzOutcome", "run_fuzz", "write_points"]
 
 #: The workflow whose stage parameters every fuzz scan runs with (only the input, the
 #: store, the outputs and the scheduler are replaced; ``tile_size`` where a spec sets one).
-DEFAULT_WORKFLOW = Path(__file__).resolve().parents[1] / "workflows" / "local.yaml"
+DEFAULT_WORKFLOW = shipped_workflows() / "local.yaml"
 
 
 @dataclass(kw_only=True)

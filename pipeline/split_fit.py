@@ -22,11 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.workflow import shipped_workflows
+
 __all__ = ["TRAINING_SCENES", "file_groups", "fit_split_from_scenes", "procedural_groups", "training_groups"]
 
 #: Scene numbers of the training set (module docstring).
 TRAINING_SCENES: tuple[int, ...] = tuple(range(40)) + tuple(range(100, 112))
-_WORKFLOW = Path(__file__).resolve().parent.parent / "workflows" / "local.yaml"
+_WORKFLOW = shipped_workflows() / "local.yaml"
 
 
 def _scene(i: int):  # type: ignore[no-untyped-def]

@@ -26,7 +26,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from tiling.errors import ConfigError
 
-__all__ = ["Workflow", "WorkflowError", "load_workflow", "json_schema", "apply_override"]
+__all__ = ["Workflow", "WorkflowError", "load_workflow", "json_schema", "apply_override", "shipped_workflows"]
 
 
 class WorkflowError(ConfigError):
@@ -355,6 +355,17 @@ def load_workflow(path: str | Path, overrides: Sequence[str] = (), *, check_file
                 where = f":{line}" if line is not None else ""
                 raise WorkflowError(f"{path}{where}: input.files[{i}]: file {f} does not exist")
     return wf
+
+
+def shipped_workflows() -> Path:
+    """The folder of the example workflows: ``workflows/`` of a source checkout, or the
+    copy a wheel installs as ``pipeline/workflows``."""
+    repo = Path(__file__).resolve().parents[1] / "workflows"
+    if (repo / "local.yaml").is_file():
+        return repo
+    from importlib.resources import files
+
+    return Path(str(files("pipeline.workflows").joinpath("local.yaml"))).parent
 
 
 def schema_text() -> str:

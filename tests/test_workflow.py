@@ -124,3 +124,36 @@ def test_tree_decision_is_checked(tmp_path):
     assert load_workflow(path, ["tree.decision=energy"]).tree.decision == "energy"
     with pytest.raises(WorkflowError, match="tree.decision"):
         load_workflow(path, ["tree.decision=coin"])
+
+
+def test_init_writes_the_shipped_workflows_and_keeps_a_users_files(tmp_path, capsys):
+    from pipeline.cli import main
+
+    target = tmp_path / "mine"
+    assert main(["init", str(target)]) == 0
+    assert sorted(p.name for p in target.iterdir()) == ["cluster.yaml", "laptop.yaml", "local.yaml", "schema.json"]
+    assert isinstance(load_workflow(target / "local.yaml", check_files=False), Workflow)
+    (target / "local.yaml").write_text("# mine\n")
+    capsys.readouterr()
+    assert main(["init", str(target)]) == 2
+    err = capsys.readouterr().err
+    assert "pass --overwrite" in err
+    assert len(err.strip().splitlines()) == 1
+    assert (target / "local.yaml").read_text() == "# mine\n"  # nothing already written is lost
+    assert main(["init", str(target), "--overwrite"]) == 0
+    assert (target / "local.yaml").read_text() == (REPO / "workflows" / "local.yaml").read_text()
+
+
+def test_the_wheel_ships_the_workflows_under_the_package(tmp_path):
+    """A normal install has the example workflows (``hollowtree init``, ``evaluate``'s
+    default) as ``pipeline/workflows``, not as a top-level package of their own."""
+    import subprocess
+    import sys
+    import zipfile
+
+    r = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w",
+                        str(tmp_path), str(REPO)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    names = zipfile.ZipFile(next(tmp_path.glob("hollowtree-*.whl"))).namelist()
+    assert {f"pipeline/workflows/{n}" for n in ("local.yaml", "laptop.yaml", "cluster.yaml", "schema.json")} <= set(names)
+    assert not any(n.startswith("workflows/") for n in names)
