@@ -52,32 +52,9 @@ STAGE = "tree"
 #: How a node's proposal is kept (``TreeStageParams.decision``).
 DECISIONS = ("split-model", "energy")
 #: Version of the tree's algorithm (tree/): part of the stage's parameters hash and of the
-#: workflow parameters a run records, so a store made by an older version is redone.
-#: tree-v4: a tall pillar is a minaret (tree/tall.py); tree-v5: the split model
-#: (tree/data/split-v1.json) refitted on coarse-v4 element groups; tree-v6: a storey cut
-#: at a solid band that reaches the node's top (tree.sequences.occupancy_cut, open_high),
-#: and a tall pillar with a flat footprint stays a pillar (tree.tall.MIN_FOOTPRINT_RATIO);
-#: tree-v7: the band between two storeys is a wall child of its own (SequenceParams.bands);
-#: tree-v8: a minaret instance not taller than tree.pillar_max_height is a pillar;
-#: tree-v9: clutter stands on the ground and is no taller than a tree (tree.tall.not_clutter);
-#: tree-v10: a node is split at its gaps first (tree.sequences.gaps), and clutter is no
-#: larger than a tree along x and y too (tree.other_max_size for other_max_height);
-#: tree-v11: a wall's storeys cut is judged by the bays below it (tree.look_ahead);
-#: tree-v12: the merge across groups compares the boxes axis by axis and stacks a
-#: minaret's pieces (tree.merge), and a tall slender dome is a minaret (tree.tall.slender_domes);
-#: tree-v13: a root nothing splits is cut into its parts apart when HollowNet calls them
-#: different classes, one a dome (tree.sequences.parts, tree.build.PART_CLASSES);
-#: tree-v14: an arch stacked with a minaret of another group is part of it (tree.merge.MERGE_INTO);
-#: tree-v15: arcades are rows of bays (tree/rows.py: pieces take their piers, gaps get bays,
-#: end bays lose their end wall; tree/samples, tree/rows/cells), and MERGE_INTO_OVERLAP 0.5;
-#: tree-v16: frames (tree/frames.py: a portal's face joins its passage, a lone bay's
-#: intrados takes its piers and the opening beside them is a bay; wall instances sampled too);
-#: tree-v17: a group called dome or pillar gave up the segments called pillar;
-#: tree-v18: instead, a root called dome or pillar that nothing splits gives up its posts
-#: HollowNet calls pillars (tree.sequences.posts, tree.build.POSTS_FROM);
-#: tree-v19: the posts come from the slice that gives the most (tree.sequences.POST_TRIES);
-#: tree-v20: the rest of a posts split is cut into its parts apart, stacked ones too.
-TREE_ALGORITHM = "tree-v20"
+#: workflow parameters a run records, so a store made by an older version is redone. What
+#: each version changed is in CHANGELOG.md (and git).
+TREE_ALGORITHM = "tree-v21"
 #: Points sampled from each wall instance for the frames (tree/frames.py): a pier's face
 #: beside a bay's jamb is a strip a few tenths of a metre wide in a facade's wall.
 WALL_SAMPLE_POINTS = 16384

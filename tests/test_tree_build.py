@@ -427,7 +427,7 @@ class _ByProposal:
 
 
 def test_a_storeys_split_is_kept_when_a_storey_splits(monkeypatch):
-    """A wall's storey cut leaves two walls (the split model rejects it, as the S1 cut that
+    """A wall's (or a minaret's) storey cut leaves two walls (the split model rejects it, as the S1 cut that
     ties with it), but the storey below splits into bays: the storey cut is judged by that
     look-ahead, not by its own score."""
     import tree.build as tb
@@ -466,7 +466,12 @@ def test_a_storeys_split_is_kept_when_a_storey_splits(monkeypatch):
     # Off, at depth 1, or when the storey's best is itself a storey cut: no look-ahead.
     assert len(build_tree(xyz, wall, split=_ByProposal(), rng=0, look_ahead=False).nodes) == 1
     assert len(build_tree(xyz, wall, split=_ByProposal(), rng=0, max_depth=1).nodes) == 1
-    assert len(build_tree(xyz, _Always(int(ClassId.MINARET)), split=_ByProposal(), rng=0).nodes) == 1  # a wall's cut only
+    # a facade HollowNet calls minaret is looked into too (LOOK_AHEAD_FROM); a dome is not
+    assert len(build_tree(xyz, _Always(int(ClassId.MINARET)), split=_ByProposal(), rng=0).nodes) == 1 + 2 + 6
+    assert len(build_tree(xyz, _Always(int(ClassId.DOME)), split=_ByProposal(), rng=0).nodes) == 1
+    with monkeypatch.context() as m:
+        m.setattr(tb, "LOOK_AHEAD_FROM", (int(ClassId.WALL),))
+        assert len(build_tree(xyz, _Always(int(ClassId.MINARET)), split=_ByProposal(), rng=0).nodes) == 1
     with monkeypatch.context() as m:  # no storey with openings (every storey solid): no look-ahead
         m.setattr(tb, "OPEN_STOREY", 0.0)
         assert len(build_tree(xyz, wall, split=_ByProposal(), rng=0).nodes) == 1
