@@ -88,7 +88,7 @@ def make_crop(site: str, scan_points: int, crop_points: int, seed: int, tmp: Pat
     """Synthesise a scan, crop the x-y square around the median to ``crop_points``."""
     import laspy
 
-    from scenes.synth import synth
+    from hollowtree.scenes.synth import synth
 
     path = tmp / f"{site}.laz"
     t0 = time.perf_counter()
@@ -168,9 +168,9 @@ def run_ours(xyz: np.ndarray, settings: str = "kernel") -> dict:
     """``settings``: "kernel" = ``RansacParams()`` defaults (min support 200, cluster
     epsilon 0.15 m); "stage" = the coarse stage's defaults (min support 1000, cluster
     epsilon max(0.15, 2 x point spacing), as ``pipeline/coarse.py`` sets them)."""
-    from primitives.dbscan import dbscan_segments, default_eps
-    from primitives.normals import estimate_normals
-    from primitives.ransac import RansacParams, efficient_ransac
+    from hollowtree.primitives.dbscan import dbscan_segments, default_eps
+    from hollowtree.primitives.normals import estimate_normals
+    from hollowtree.primitives.ransac import RansacParams, efficient_ransac
 
     t0 = time.perf_counter()
     nr = estimate_normals(xyz, k=16)
@@ -201,8 +201,8 @@ def run_tile_kernel(xyz: np.ndarray, eps: float, seed: int = 0) -> dict:
     """What ``hollowtree coarse`` runs on one tile (``pipeline.coarse._segment_points``)
     with the stage's defaults: the three steps above plus free segments and the sparse
     second pass. Timed as a whole."""
-    from pipeline.coarse import CoarseParams, _segment_points
-    from primitives.ransac import RansacParams
+    from hollowtree.pipeline.coarse import CoarseParams, _segment_points
+    from hollowtree.primitives.ransac import RansacParams
 
     params = CoarseParams(ransac=RansacParams(min_support=1000, cluster_epsilon=max(0.15, 2.0 * eps / 3.0)))
     t0 = time.perf_counter()
@@ -211,7 +211,7 @@ def run_tile_kernel(xyz: np.ndarray, eps: float, seed: int = 0) -> dict:
 
 
 def split_by_dbscan(xyz: np.ndarray, labels: np.ndarray, eps: float) -> tuple[np.ndarray, float]:
-    from primitives.dbscan import dbscan_segments
+    from hollowtree.primitives.dbscan import dbscan_segments
 
     t0 = time.perf_counter()
     seg = dbscan_segments(xyz, labels, eps=eps, min_samples=10)
@@ -391,7 +391,7 @@ def bench_site(site: str, args: argparse.Namespace, tmp: Path) -> dict:
     notes: list[str] = []
     summary: dict = {"site": site, "info": info}
     if args.only_repeats:
-        from primitives.dbscan import default_eps
+        from hollowtree.primitives.dbscan import default_eps
 
         eps = default_eps(xyz)
         run_tile_kernel(xyz[:50_000], eps)  # compiles or loads numba's kernels outside the timings
@@ -427,7 +427,7 @@ def bench_site(site: str, args: argparse.Namespace, tmp: Path) -> dict:
         traceback.print_exc()
     eps = ours["eps"] if ours else None
     if eps is None:
-        from primitives.dbscan import default_eps
+        from hollowtree.primitives.dbscan import default_eps
         eps = default_eps(xyz)
 
     # CGAL

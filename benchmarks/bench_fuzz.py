@@ -38,8 +38,8 @@ from hypothesis import HealthCheck, Phase, given, settings  # noqa: E402
 from hypothesis import seed as hseed  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-from pipeline.fuzz import FuzzOutcome, run_fuzz  # noqa: E402
-from scenes.fuzz import fuzz_specs  # noqa: E402
+from hollowtree.pipeline.fuzz import FuzzOutcome, run_fuzz  # noqa: E402
+from hollowtree.scenes.fuzz import fuzz_specs  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -39,11 +39,11 @@ if str(REPO) not in sys.path:
 
 import numpy as np  # noqa: E402
 
-from pipeline.evaluate import evaluate_inputs  # noqa: E402
-from pipeline.tree_stage import TREE_ALGORITHM  # noqa: E402
-from scenes.procedural import FAMILIES, family_of, scan_draw, split_seeds  # noqa: E402
-from scenes.synth import synth  # noqa: E402
-from tiling.classes import ELEMENT_CLASSES, ClassId  # noqa: E402
+from hollowtree.pipeline.evaluate import evaluate_inputs  # noqa: E402
+from hollowtree.pipeline.tree_stage import TREE_ALGORITHM  # noqa: E402
+from hollowtree.scenes.procedural import FAMILIES, family_of, scan_draw, split_seeds  # noqa: E402
+from hollowtree.scenes.synth import synth  # noqa: E402
+from hollowtree.tiling.classes import ELEMENT_CLASSES, ClassId  # noqa: E402
 
 METHODS = {"tree": ("tree", []), "energy": ("tree", ["tree.decision=energy"]),
            "ransac+dbscan": ("ransac+dbscan", [])}
@@ -56,7 +56,7 @@ def _points(seed: int, lo: float, hi: float) -> int:
 
 def _element_sizes(path: Path) -> dict[str, list[int]]:
     """Points of every ground-truth element instance of a scan, per element class."""
-    from tiling.readers import PointBlock, read_blocks
+    from hollowtree.tiling.readers import PointBlock, read_blocks
 
     b = PointBlock.concat(read_blocks(path))
     cls, inst = np.asarray(b.extra["gt_class"]), np.asarray(b.extra["gt_instance"]).astype(np.int64)

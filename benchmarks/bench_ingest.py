@@ -68,12 +68,12 @@ def run_command(argv: list[str], env: dict[str, str]) -> tuple[float, float, flo
 
 
 def ingest_argv(path: Path, store: Path, processes: bool) -> list[str]:
-    return [sys.executable, "-m", "pipeline.cli", "ingest", str(path), "--store", str(store),
+    return [sys.executable, "-m", "hollowtree", "ingest", str(path), "--store", str(store),
             "--no-progress", *(["--processes"] if processes else [])]
 
 
 def fixed_cost(tmp: Path, env: dict[str, str], processes: bool) -> None:
-    from scenes.synth import synth
+    from hollowtree.scenes.synth import synth
 
     start = min(run_command([sys.executable, "-c", "pass"], env)[0] for _ in range(3))
     imports = min(run_command([sys.executable, "-c", "import pipeline.cli, tiling.ingest, distributed, numba"],
@@ -100,7 +100,7 @@ def main() -> None:
     repo = Path(__file__).resolve().parents[1]
     env = dict(os.environ, PYTHONPATH=str(repo))
     sys.path.insert(0, str(repo))
-    from scenes.synth import synth
+    from hollowtree.scenes.synth import synth
 
     print(f"machine: {os.cpu_count()} cores, "
           f"{os.sysconf('SC_PAGE_SIZE') * os.sysconf('SC_PHYS_PAGES') / 2**30:.0f} GiB; "

@@ -162,8 +162,8 @@ def projection(store: Path, n_points: int, wall: float, stage_rows: list[dict[st
     unit over its median, in points."""
     import statistics
 
-    from pipeline.timing import WAVES, predict_seconds, waves
-    from tiling.store import RunStore
+    from hollowtree.pipeline.timing import WAVES, predict_seconds, waves
+    from hollowtree.tiling.store import RunStore
 
     st = RunStore.open(str(store))
     wl = waves({name: st.records(name) for name in {n for _, _, n in WAVES}})
@@ -215,9 +215,9 @@ def main() -> None:
     if args.reference is not None and not args.reference.is_file():
         ap.error(f"--reference {args.reference}: no such file")
     sys.path.insert(0, str(REPO))
-    from pipeline.run import make_synthetic_input
-    from pipeline.workflow import load_workflow
-    from tiling.readers import probe
+    from hollowtree.pipeline.run import make_synthetic_input
+    from hollowtree.pipeline.workflow import load_workflow
+    from hollowtree.tiling.readers import probe
 
     cores = os.cpu_count() or 1
     runs = []
@@ -245,7 +245,7 @@ def main() -> None:
             print(f"{n:,} points: reference read {before / 1e6:.2f} M points/s")
             if store.exists():
                 shutil.rmtree(store)
-            cmd = [sys.executable, "-m", "pipeline.cli", "run", str(args.workflow), "--no-progress"]
+            cmd = [sys.executable, "-m", "hollowtree", "run", str(args.workflow), "--no-progress"]
             for s in [*sets, *([f"cluster.workers={workers}"] if args.workers else [])]:
                 cmd += ["--set", s]
             print(f"{n:,} points: {' '.join(cmd[2:])}")

@@ -34,7 +34,7 @@ def run_once(scan: Path, below: int, work: Path) -> float:
     """Seconds of one ``hollowtree run`` of ``scan``, outputs included; raises on failure."""
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
-    cmd = [sys.executable, "-m", "pipeline.cli", "run", str(REPO / "workflows" / "local.yaml"), "--no-progress"]
+    cmd = [sys.executable, "-m", "hollowtree", "run", str(REPO / "workflows" / "local.yaml"), "--no-progress"]
     for s in (f'input.files=["{scan}"]', "input.synth=null", f"store={work / 's.zarr'}",
               f"outputs.las={work / 'l.laz'}", f"outputs.parquet={work / 't'}", f"outputs.png={work / 'v.png'}",
               f"cluster.in_process_below={below}"):
@@ -53,8 +53,8 @@ def main() -> None:
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
     sys.path.insert(0, str(REPO))
-    from scenes.synth import synth
-    from tiling.readers import probe
+    from hollowtree.scenes.synth import synth
+    from hollowtree.tiling.readers import probe
 
     scans = [SIMPLE] if SIMPLE.is_file() else []
     for size in args.sizes:

@@ -54,8 +54,8 @@ def main() -> None:
 
     import laspy
 
-    from primitives.dbscan import default_eps, sparse_points
-    from scenes.synth import synth
+    from hollowtree.primitives.dbscan import default_eps, sparse_points
+    from hollowtree.scenes.synth import synth
 
     print(f"machine: {os.cpu_count()} cores; {args.repeats} interleaved repeats per site")
     print("| site | points | sparse rows | reference s (median) | sparse_points s (median) | ratio | equal |")

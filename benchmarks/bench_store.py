@@ -40,7 +40,7 @@ def main() -> None:
     ap.add_argument("--rows", type=int, default=20_000)
     args = ap.parse_args()
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from tiling.store import _COMPRESSOR, CHUNK_POINTS, RunStore
+    from hollowtree.tiling.store import _COMPRESSOR, CHUNK_POINTS, RunStore
 
     port = _free_port()
     log = Path(tempfile.mkdtemp()) / "moto.log"

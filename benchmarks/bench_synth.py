@@ -19,7 +19,7 @@ from pathlib import Path
 CHILD = r"""
 import json, resource, sys, time
 from pathlib import Path
-from scenes.synth import synth
+from hollowtree.scenes.synth import synth
 site, n, out = sys.argv[1], int(sys.argv[2]), Path(sys.argv[3])
 t0 = time.perf_counter()
 r = synth(site, out, n_points=n, overwrite=True)

@@ -58,12 +58,12 @@ if str(REPO) not in sys.path:
 
 from scipy.spatial import cKDTree  # noqa: E402
 
-from scenes.scanner import ScanParams, scan  # noqa: E402
-from scenes.sites import build_scene  # noqa: E402
-from tiling.classes import NUM_CLASSES, ClassId  # noqa: E402
-from tree import build_tree  # noqa: E402
-from tree.operators import TransportCurve, h, p, psi, rho, u, v1, v2  # noqa: E402
-from tree.sequences import SequenceParams, propose, s1, s2, s3  # noqa: E402
+from hollowtree.scenes.scanner import ScanParams, scan  # noqa: E402
+from hollowtree.scenes.sites import build_scene  # noqa: E402
+from hollowtree.tiling.classes import NUM_CLASSES, ClassId  # noqa: E402
+from hollowtree.tree import build_tree  # noqa: E402
+from hollowtree.tree.operators import TransportCurve, h, p, psi, rho, u, v1, v2  # noqa: E402
+from hollowtree.tree.sequences import SequenceParams, propose, s1, s2, s3  # noqa: E402
 
 SEQ_TARGET_S = 0.050
 TREE_TARGET_S = 1.0
@@ -210,17 +210,17 @@ def main(argv: list[str] | None = None) -> dict:
     print(f"\n## whole tree: minaret, {len(pts)} points, max_depth 3")
     print(f"{'classifier':40s} {'total s':>8s} {'/ 1 s':>6s} {'classifier s':>12s} {'calls':>6s} "
           f"{'segments':>8s} {'nodes':>6s} {'root':>10s}")
-    from tree.split import load_split_model
+    from hollowtree.tree.split import load_split_model
 
     clfs: list[tuple[str, object, object]] = [("stand-in (tests), energy", StandInClassifier(xyz, gcls), None)]
     if HOLLOWNET_WEIGHTS.is_file():
-        from hollownet.predict import Classifier
+        from hollowtree.hollownet.predict import Classifier
         clfs.append(("HollowNet (CPU), energy", Classifier.get(), None))
         clfs.append(("HollowNet (CPU), split model (default)", Classifier.get(), load_split_model()))
     else:
         report["trees"]["HollowNet"] = f"skipped: {HOLLOWNET_WEIGHTS.relative_to(REPO)} does not exist"
     if args.hollownet_weights is not None:
-        from hollownet.predict import Classifier
+        from hollowtree.hollownet.predict import Classifier
         clfs.append((f"HollowNet ({args.hollownet_weights.name}, timing only)",
                      Classifier(args.hollownet_weights), None))
     for label, clf, split in clfs:

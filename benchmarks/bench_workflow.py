@@ -34,8 +34,8 @@ def main() -> None:
     args = ap.parse_args()
     repo = Path(__file__).resolve().parents[1]
     sys.path.insert(0, str(repo))
-    from pipeline.run import make_synthetic_input
-    from pipeline.workflow import load_workflow
+    from hollowtree.pipeline.run import make_synthetic_input
+    from hollowtree.pipeline.workflow import load_workflow
 
     wf = load_workflow(args.workflow, args.overrides)
     t0 = time.perf_counter()
@@ -47,7 +47,7 @@ def main() -> None:
     for out in (wf.outputs.las, wf.outputs.png):
         if out and Path(out).exists():
             os.remove(out)
-    cmd = [sys.executable, "-m", "pipeline.cli", "run", str(args.workflow), "--no-progress"]
+    cmd = [sys.executable, "-m", "hollowtree", "run", str(args.workflow), "--no-progress"]
     for o in args.overrides:
         cmd += ["--set", o]
     t0 = time.perf_counter()

@@ -26,11 +26,11 @@ if str(REPO) not in sys.path:
 
 import numpy as np  # noqa: E402
 
-from pipeline.labels import LEAF_BITS  # noqa: E402
-from scenes.metrics import LOSS_BUCKETS, loss_buckets  # noqa: E402
-from tiling.classes import ELEMENT_CLASSES, ClassId  # noqa: E402
-from tiling.readers import PointBlock, read_blocks  # noqa: E402
-from tiling.store import RunStore  # noqa: E402
+from hollowtree.pipeline.labels import LEAF_BITS  # noqa: E402
+from hollowtree.scenes.metrics import LOSS_BUCKETS, loss_buckets  # noqa: E402
+from hollowtree.tiling.classes import ELEMENT_CLASSES, ClassId  # noqa: E402
+from hollowtree.tiling.readers import PointBlock, read_blocks  # noqa: E402
+from hollowtree.tiling.store import RunStore  # noqa: E402
 
 
 def diagnose_store(store_path: Path, *, tiny: int) -> list[dict]:

@@ -5,7 +5,7 @@ registry and checkpoints; ``predict`` the batched :class:`Classifier` (one per p
 ``dataset`` makes training data from synthetic scans; ``train`` trains and reports.
 """
 
-from hollownet.model import (
+from hollowtree.hollownet.model import (
     DEFAULT_WEIGHTS,
     NUM_OUTPUTS,
     OUTPUT_CLASSES,
@@ -16,8 +16,14 @@ from hollownet.model import (
     list_models,
     load_model,
 )
-from hollownet.predict import Classifier, Prediction
-from hollownet.voxels import EMPTY, OCCUPIED, DegenerateSegmentError, voxelize, voxelize_batch
+from hollowtree.hollownet.predict import Classifier, Prediction
+from hollowtree.hollownet.voxels import (
+    EMPTY,
+    OCCUPIED,
+    DegenerateSegmentError,
+    voxelize,
+    voxelize_batch,
+)
 
 __all__ = [
     "DEFAULT_WEIGHTS",

@@ -14,8 +14,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from scenes._builders import add_arcade
-from scenes.elements import (
+from hollowtree.scenes._builders import add_arcade
+from hollowtree.scenes.elements import (
     ArcPath,
     StraightPath,
     _crown,
@@ -34,10 +34,10 @@ from scenes.elements import (
     tree,
     wall,
 )
-from scenes.mesh import TriMesh
-from scenes.scene import Scene, SceneBuilder
-from scenes.shapes import box, ellipsoid
-from tiling.classes import ClassId
+from hollowtree.scenes.mesh import TriMesh
+from hollowtree.scenes.scene import Scene, SceneBuilder
+from hollowtree.scenes.shapes import box, ellipsoid
+from hollowtree.tiling.classes import ClassId
 
 __all__ = ["RECIPES", "random_scene", "storeyed_arcades"]
 

@@ -30,8 +30,8 @@ from typing import Any
 import torch
 from torch import nn
 
-from tiling.classes import CLASS_NAMES, ELEMENT_CLASSES, PLANAR_CLASSES, ClassId
-from tiling.errors import InputFileError, PipelineError
+from hollowtree.tiling.classes import CLASS_NAMES, ELEMENT_CLASSES, PLANAR_CLASSES, ClassId
+from hollowtree.tiling.errors import InputFileError, PipelineError
 
 __all__ = [
     "CHECKPOINT_VERSION",

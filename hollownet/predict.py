@@ -22,11 +22,11 @@ import numpy as np
 import numpy.typing as npt
 import torch
 
-from hollownet.model import DEFAULT_WEIGHTS, OUTPUT_CLASSES, load_model
-from hollownet.voxels import GRID_SIZE, voxelize_batch
-from tiling.classes import ClassId
-from tiling.columns import column_span
-from tiling.errors import ConfigError
+from hollowtree.hollownet.model import DEFAULT_WEIGHTS, OUTPUT_CLASSES, load_model
+from hollowtree.hollownet.voxels import GRID_SIZE, voxelize_batch
+from hollowtree.tiling.classes import ClassId
+from hollowtree.tiling.columns import column_span
+from hollowtree.tiling.errors import ConfigError
 
 __all__ = ["Classifier", "Prediction", "default_threads"]
 

@@ -38,17 +38,17 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
-from hollownet._png import confusion_png
-from hollownet.dataset import DatasetParams, build_dataset, load_dataset
-from hollownet.model import (
+from hollowtree.hollownet._png import confusion_png
+from hollowtree.hollownet.dataset import DatasetParams, build_dataset, load_dataset
+from hollowtree.hollownet.model import (
     OUTPUT_CLASSES,
     get_model,
     list_models,
     load_checkpoint,
     save_checkpoint,
 )
-from tiling.classes import CLASS_NAMES
-from tiling.errors import ConfigError, OutputExistsError
+from hollowtree.tiling.classes import CLASS_NAMES
+from hollowtree.tiling.errors import ConfigError, OutputExistsError
 
 __all__ = ["TrainConfig", "TrainReport", "confusion_matrix", "format_confusion", "grids_to_input",
            "default_data_dir", "resolve_device", "train", "evaluate"]

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from tiling.errors import PipelineError
+from hollowtree.tiling.errors import PipelineError
 
 __all__ = [
     "EMPTY",

@@ -15,13 +15,13 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
-from tiling.errors import PipelineError
+from hollowtree.tiling.errors import PipelineError
 
 __all__ = ["main", "build_parser"]
 
 logger = logging.getLogger("hollowtree")
-#: The loggers ``--verbose`` turns to DEBUG: this package's (each module logs under its name).
-OWN_LOGGERS = ("hollowtree", "pipeline", "tiling", "tree", "hollownet", "primitives", "scenes")
+#: The logger ``--verbose`` turns to DEBUG: every module logs under its name, below ``hollowtree``.
+OWN_LOGGERS = ("hollowtree",)
 
 
 def _version() -> str:
@@ -50,7 +50,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _synth_description() -> str:
-    from scenes.sites import (  # scenes imports take ~0.3 s: only for this help
+    from hollowtree.scenes.sites import (  # scenes imports take ~0.3 s: only for this help
         GENERATED,
         SITES,
         TEST_SCENES,
@@ -199,8 +199,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--no-progress", action="store_true", help="no progress bars")
     c.set_defaults(func=_cmd_coarse)
 
-    from pipeline.hollownet_cmd import add_labelled_args
-    from pipeline.hollownet_cmd import add_parsers as add_hollownet_parsers
+    from hollowtree.pipeline.hollownet_cmd import add_labelled_args
+    from hollowtree.pipeline.hollownet_cmd import add_parsers as add_hollownet_parsers
 
     add_hollownet_parsers(sub)  # train, classify
 
@@ -361,9 +361,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _cmd_tree(args: argparse.Namespace) -> int:
-    from pipeline.graph import task_runner, timed_stage
-    from pipeline.tree_stage import TreeStageParams, run_tree
-    from tiling.store import RunStore
+    from hollowtree.pipeline.graph import task_runner, timed_stage
+    from hollowtree.pipeline.tree_stage import TreeStageParams, run_tree
+    from hollowtree.tiling.store import RunStore
 
     RunStore.open(args.store)
     params = TreeStageParams(max_depth=args.max_depth, decision=args.decision, threshold=args.threshold, batch_points=args.batch_points,
@@ -376,9 +376,9 @@ def _cmd_tree(args: argparse.Namespace) -> int:
 
 
 def _cmd_labels(args: argparse.Namespace) -> int:
-    from pipeline.graph import task_runner, timed_stage
-    from pipeline.labels import run_labels
-    from tiling.store import RunStore
+    from hollowtree.pipeline.graph import task_runner, timed_stage
+    from hollowtree.pipeline.labels import run_labels
+    from hollowtree.tiling.store import RunStore
 
     stages = RunStore.open(args.store).attrs.get("stages", {})
 
@@ -399,8 +399,8 @@ def _cmd_labels(args: argparse.Namespace) -> int:
 
 
 def _cmd_fit_energy(args: argparse.Namespace) -> int:
-    from tiling.errors import ConfigError
-    from tree.fit import fit_energy_from_scenes
+    from hollowtree.tiling.errors import ConfigError
+    from hollowtree.tree.fit import fit_energy_from_scenes
 
     if args.out.exists() and not args.overwrite:
         raise ConfigError(f"{args.out} exists; pass --overwrite to replace it")
@@ -416,10 +416,10 @@ def _cmd_fit_energy(args: argparse.Namespace) -> int:
 def _cmd_fit_split(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from pipeline.hollownet_cmd import class_map_of
-    from pipeline.split_fit import TRAINING_SCENES, fit_split_from_scenes
-    from scenes.procedural import split_seeds
-    from tiling.errors import ConfigError
+    from hollowtree.pipeline.hollownet_cmd import class_map_of
+    from hollowtree.pipeline.split_fit import TRAINING_SCENES, fit_split_from_scenes
+    from hollowtree.scenes.procedural import split_seeds
+    from hollowtree.tiling.errors import ConfigError
 
     if args.out.exists() and not args.overwrite:
         raise ConfigError(f"{args.out} exists; pass --overwrite to replace it")
@@ -452,7 +452,7 @@ def _cmd_fit_split(args: argparse.Namespace) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from pipeline.workflow import WorkflowError, load_workflow, schema_text
+    from hollowtree.pipeline.workflow import WorkflowError, load_workflow, schema_text
 
     if args.schema:
         sys.stdout.write(schema_text())
@@ -463,7 +463,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if args.scheduler:
         overrides.append(f"cluster.scheduler={args.scheduler}")
     wf = load_workflow(args.workflow, overrides)
-    from pipeline.run import run_workflow
+    from hollowtree.pipeline.run import run_workflow
 
     try:
         report = run_workflow(wf, progress=not args.no_progress)
@@ -482,7 +482,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from pipeline.evaluate import evaluate_inputs
+    from hollowtree.pipeline.evaluate import evaluate_inputs
 
     overrides = list(args.overrides)
     if args.scheduler:
@@ -496,8 +496,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 def _cmd_init(args: argparse.Namespace) -> int:
     import shutil
 
-    from pipeline.workflow import shipped_workflows
-    from tiling.errors import ConfigError, OutputExistsError
+    from hollowtree.pipeline.workflow import shipped_workflows
+    from hollowtree.tiling.errors import ConfigError, OutputExistsError
 
     src = sorted(p for p in shipped_workflows().iterdir() if p.suffix in (".yaml", ".json"))
     if args.dir.exists() and not args.dir.is_dir():
@@ -515,9 +515,9 @@ def _cmd_init(args: argparse.Namespace) -> int:
 def _cmd_status(args: argparse.Namespace) -> int:
     import json
 
-    from pipeline.timing import WAVES, waves
-    from tiling.lock import StoreLock
-    from tiling.store import RunStore
+    from hollowtree.pipeline.timing import WAVES, waves
+    from hollowtree.tiling.lock import StoreLock
+    from hollowtree.tiling.store import RunStore
 
     store = RunStore.open(args.store)
     attrs = store.attrs
@@ -561,9 +561,9 @@ def _wave_line(w: Any) -> str:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from pipeline.export import export_las, export_parquet, export_png
-    from tiling.errors import ConfigError
-    from tiling.store import RunStore
+    from hollowtree.pipeline.export import export_las, export_parquet, export_png
+    from hollowtree.tiling.errors import ConfigError
+    from hollowtree.tiling.store import RunStore
 
     if not (args.las or args.parquet or args.png):
         raise ConfigError("give at least one of --las, --parquet, --png")
@@ -580,10 +580,10 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def _cmd_coarse(args: argparse.Namespace) -> int:
-    from pipeline.coarse import CoarseParams, run_coarse
-    from pipeline.graph import task_runner, timed_stage
-    from primitives.ransac import RansacParams
-    from tiling.store import RunStore
+    from hollowtree.pipeline.coarse import CoarseParams, run_coarse
+    from hollowtree.pipeline.graph import task_runner, timed_stage
+    from hollowtree.primitives.ransac import RansacParams
+    from hollowtree.tiling.store import RunStore
 
     RunStore.open(args.store)  # a missing store or another schema fails before any cluster starts
     params = CoarseParams(
@@ -622,9 +622,9 @@ def _int_list(text: str) -> tuple[int, ...]:
 def _cmd_ingest(args: argparse.Namespace) -> int:
     import gc
 
-    from pipeline.graph import task_runner, timed_stage, tune_process_for_streaming
-    from tiling.errors import ConfigError
-    from tiling.ingest import IngestParams, ingest
+    from hollowtree.pipeline.graph import task_runner, timed_stage, tune_process_for_streaming
+    from hollowtree.tiling.errors import ConfigError
+    from hollowtree.tiling.ingest import IngestParams, ingest
 
     params = IngestParams(
         tile_size=args.tile_size, buffer=args.buffer, voxel=args.voxel, bbox=args.bbox,
@@ -661,7 +661,7 @@ def _units(text: str | None) -> float | str | None:
 def _cmd_synth(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from scenes.synth import synth
+    from hollowtree.scenes.synth import synth
 
     bars: list[tqdm] = []
 

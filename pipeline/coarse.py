@@ -32,23 +32,23 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from pipeline.graph import in_child
-from primitives.blocks import block_context, split_blocks
-from primitives.dbscan import dbscan_segments, sparse_points, window_spacing
-from primitives.group import (
+from hollowtree.pipeline.graph import in_child
+from hollowtree.primitives.blocks import block_context, split_blocks
+from hollowtree.primitives.dbscan import dbscan_segments, sparse_points, window_spacing
+from hollowtree.primitives.group import (
     large_segments,
     segment_contacts,
     segment_contacts_chunked,
     set_in_plane,
     stacked_pairs,
 )
-from primitives.normals import estimate_normals
-from primitives.ransac import RansacParams, efficient_ransac
-from primitives.score import load_kernels
-from primitives.stitch import UnionFind
-from tiling.errors import ConfigError, PipelineError
-from tiling.grid import TileGrid
-from tiling.store import CHUNK_POINTS, RunStore
+from hollowtree.primitives.normals import estimate_normals
+from hollowtree.primitives.ransac import RansacParams, efficient_ransac
+from hollowtree.primitives.score import load_kernels
+from hollowtree.primitives.stitch import UnionFind
+from hollowtree.tiling.errors import ConfigError, PipelineError
+from hollowtree.tiling.grid import TileGrid
+from hollowtree.tiling.store import CHUNK_POINTS, RunStore
 
 __all__ = ["CoarseParams", "PRIMITIVE_CODES", "coarse_tile", "run_coarse", "CoarseReport"]
 

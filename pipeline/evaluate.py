@@ -39,13 +39,13 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.labels import LEAF_BITS
-from pipeline.workflow import shipped_workflows
-from scenes.metrics import Evaluation, LabelCounts, count_labels, score_counts
-from tiling.classes import ELEMENT_CLASSES
-from tiling.errors import ConfigError, InputFileError, PipelineError
-from tiling.readers import SUFFIXES, probe, read_blocks
-from tiling.store import RunStore
+from hollowtree.pipeline.labels import LEAF_BITS
+from hollowtree.pipeline.workflow import shipped_workflows
+from hollowtree.scenes.metrics import Evaluation, LabelCounts, count_labels, score_counts
+from hollowtree.tiling.classes import ELEMENT_CLASSES
+from hollowtree.tiling.errors import ConfigError, InputFileError, PipelineError
+from hollowtree.tiling.readers import SUFFIXES, probe, read_blocks
+from hollowtree.tiling.store import RunStore
 
 __all__ = ["METHODS", "GT_DIMS", "DEFAULT_WORKFLOW", "SiteResult", "evaluate_inputs", "evaluate_store",
            "format_table", "primitive_groups", "draw_panels", "seed_spread", "format_spread"]
@@ -102,8 +102,8 @@ def primitive_groups(store: RunStore) -> tuple[np.ndarray, int]:
     Returns ``(group_of, n_groups)``: ``group_of[g]`` for global segment ``g`` (index 0 is
     "no segment"), groups numbered 1..n_groups in order of their lowest global segment.
     """
-    from pipeline.coarse import _read_table
-    from primitives.stitch import UnionFind
+    from hollowtree.pipeline.coarse import _read_table
+    from hollowtree.primitives.stitch import UnionFind
 
     n_seg = int(store.attrs["stages"]["coarse"]["n_segments"])
     kinds = _read_table(store, "coarse/segments.parquet").column("kind").to_pylist()
@@ -149,8 +149,8 @@ def _classify_groups(store: RunStore, group_of: np.ndarray, n_groups: int, clf: 
     ``other_max_base``, ``other_max_size``), applied to every group as the tree stage
     applies them to every part (the base test needs ``ground``); None: HollowNet's class.
     """
-    from tree.ground import ground_or_roof
-    from tree.tall import size_rules
+    from hollowtree.tree.ground import ground_or_roof
+    from hollowtree.tree.tall import size_rules
 
     offsets = store.read_unit("coarse/csr", ["offsets"])["offsets"]
     scale = np.asarray(store.attrs["coords"]["scale"])
@@ -229,7 +229,7 @@ def evaluate_store(
     Returns the :class:`SiteResult` and a sample of at most ``n_sample`` points for the
     figure (``xyz``, ``intensity`` and each method's per-point colour key).
     """
-    from hollownet.predict import Classifier
+    from hollowtree.hollownet.predict import Classifier
 
     t0 = time.perf_counter()
     _require_labels(store)
@@ -248,7 +248,7 @@ def evaluate_store(
     # written before a rule existed has no key for it and gets the rule's default), but for
     # the base test of the clutter rule: it holds for whole objects, and a baseline's
     # segment is a piece (a tree's crown, above its trunk, does not stand on the ground).
-    from pipeline.tree_stage import TreeStageParams
+    from hollowtree.pipeline.tree_stage import TreeStageParams
 
     defaults = TreeStageParams()
     sizes = {k: tree_cfg.get(k, getattr(defaults, k)) for k in ("pillar_max_height", "other_max_size")}
@@ -257,7 +257,7 @@ def evaluate_store(
     roof_min_height = tree_cfg.get("roof_min_height")
     ground = None
     if roof_min_height is not None:
-        from pipeline.tree_stage import _ground_levels
+        from hollowtree.pipeline.tree_stage import _ground_levels
 
         ground = np.r_[np.inf, _ground_levels(store)]  # index 0: no segment
     seg_class = _classify_groups(store, np.arange(n_seg + 1), n_seg, clf, ground=ground,
@@ -358,8 +358,8 @@ def draw_panels(sample: dict[str, np.ndarray], out: Path, *, title: str) -> Path
     import matplotlib.pyplot as plt
     from matplotlib.patches import Patch
 
-    from pipeline.export import CLASS_COLOURS
-    from tiling.classes import CLASS_NAMES
+    from hollowtree.pipeline.export import CLASS_COLOURS
+    from hollowtree.tiling.classes import CLASS_NAMES
 
     uv, order = _oblique(sample["xyz"])
     span = np.ptp(uv, axis=0) if len(uv) else np.ones(2)
@@ -494,7 +494,7 @@ def _join(folder: str, name: str) -> str:
 
 def _plan(text: str, store_dir: str) -> tuple[str, str, list[str]]:
     """``(name, store, workflow overrides)`` for one INPUT; no overrides for a run store."""
-    from scenes.sites import scene_names
+    from hollowtree.scenes.sites import scene_names
 
     p = Path(text)
     if _is_store(text):
@@ -528,8 +528,8 @@ def evaluate_inputs(
     spread of the scores over the seeds (``spread``, :func:`seed_spread`). The figures
     are drawn for the first seed. Returns the first seed's results.
     """
-    from pipeline.run import run_workflow
-    from pipeline.workflow import load_workflow
+    from hollowtree.pipeline.run import run_workflow
+    from hollowtree.pipeline.workflow import load_workflow
 
     if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
         raise ConfigError(f"--seeds must be a whole number >= 1; got {seeds!r}")

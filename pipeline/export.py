@@ -31,10 +31,10 @@ import laspy
 import numpy as np
 from laspy.vlrs.known import ClassificationLookupVlr
 
-from tiling.classes import CLASS_NAMES, NUM_CLASSES, ClassId
-from tiling.errors import ConfigError, PipelineError
-from tiling.readers import las_crs, read_blocks
-from tiling.store import RunStore
+from hollowtree.tiling.classes import CLASS_NAMES, NUM_CLASSES, ClassId
+from hollowtree.tiling.errors import ConfigError, PipelineError
+from hollowtree.tiling.readers import las_crs, read_blocks
+from hollowtree.tiling.store import RunStore
 
 __all__ = ["INPUT_CLASSIFICATION", "LAS_CLASSIFICATION", "CLASS_COLOURS", "export_las", "export_parquet", "export_png", "write_outputs"]
 

@@ -24,10 +24,10 @@ import laspy
 import numpy as np
 import yaml
 
-from pipeline.workflow import shipped_workflows
-from scenes.fuzz import FuzzSpec, fuzz_points
-from tiling.classes import NUM_CLASSES
-from tiling.errors import PipelineError
+from hollowtree.pipeline.workflow import shipped_workflows
+from hollowtree.scenes.fuzz import FuzzSpec, fuzz_points
+from hollowtree.tiling.classes import NUM_CLASSES
+from hollowtree.tiling.errors import PipelineError
 
 __all__ = ["DEFAULT_WORKFLOW", "FuzzOutcome", "run_fuzz", "write_points"]
 
@@ -89,7 +89,7 @@ def _workflow(spec: FuzzSpec, scan: Path, work: Path, base: Path, span: float) -
 
 def _check(work: Path, n_in: int, xyz_in: np.ndarray) -> None:
     """Raise AssertionError unless the outputs hold every input point with a valid label."""
-    from tiling.store import RunStore
+    from hollowtree.tiling.store import RunStore
 
     store = RunStore.open(str(work / "store.zarr"))
     cls = store.read_slice("labels/class")
@@ -109,8 +109,8 @@ def run_fuzz(spec: FuzzSpec, work: Path, *, base: Path = DEFAULT_WORKFLOW, keep:
     ``work`` is emptied first; unless ``keep``, it is emptied again after a scan that
     passed (a failed one stays for a look).
     """
-    from pipeline.run import run_workflow
-    from pipeline.workflow import Workflow
+    from hollowtree.pipeline.run import run_workflow
+    from hollowtree.pipeline.workflow import Workflow
 
     t0 = time.perf_counter()
     shutil.rmtree(work, ignore_errors=True)

@@ -32,7 +32,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from tiling.errors import PipelineError
+from hollowtree.tiling.errors import PipelineError
 
 __all__ = ["fresh_workers", "in_child", "task_runner", "task_seconds", "timed_stage", "tune_process_for_streaming"]
 
@@ -295,7 +295,7 @@ def timed_stage(url: str, stage: str, runner: Callable[..., Any]) -> Iterator[No
     ``wall_s`` (the whole stage) and ``driver_s`` (the part spent outside its task waves:
     planning, stitching, reading tables, in this process alone). A stage that ran no task
     (every unit already recorded) keeps the times of the run that made it."""
-    from tiling.store import RunStore
+    from hollowtree.tiling.store import RunStore
 
     t0, busy0 = time.perf_counter(), task_seconds(runner)
     yield

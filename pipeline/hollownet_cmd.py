@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-from pipeline.cli import _positive_int
-from tiling.errors import ConfigError, InputFileError, PipelineError
+from hollowtree.pipeline.cli import _positive_int
+from hollowtree.tiling.errors import ConfigError, InputFileError, PipelineError
 
 __all__ = ["add_labelled_args", "add_parsers", "class_map_of", "cmd_classify", "cmd_train", "procedural_samples",
            "read_labelled"]
@@ -89,8 +89,8 @@ def _read_config(path: Path) -> dict[str, Any]:
 
 def cmd_train(args: argparse.Namespace) -> int:
     """``hollowtree train``."""
-    from hollownet.dataset import labelled_samples
-    from hollownet.train import TrainConfig, train
+    from hollowtree.hollownet.dataset import labelled_samples
+    from hollowtree.hollownet.train import TrainConfig, train
 
     data = _read_config(args.config) if args.config else {}
     if args.epochs is not None:
@@ -108,8 +108,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     class_map = class_map_of(args.class_map)
     labelled = []
     if args.procedural:
-        from hollownet.train import default_data_dir
-        from scenes.procedural import split_seeds
+        from hollowtree.hollownet.train import default_data_dir
+        from hollowtree.scenes.procedural import split_seeds
 
         cache = Path(config.data_dir) if config.data_dir else default_data_dir()
         for seed in split_seeds("train", args.procedural):
@@ -144,8 +144,8 @@ def procedural_samples(site_seed: int, n_points: int, cache: Path, *, seed: int,
     """
     import tempfile
 
-    from hollownet.dataset import labelled_samples
-    from pipeline.split_fit import check_training_seed, scan_training_site
+    from hollowtree.hollownet.dataset import labelled_samples
+    from hollowtree.pipeline.split_fit import check_training_seed, scan_training_site
 
     check_training_seed(site_seed, "HollowNet is trained")
     name = f"gen-{site_seed}-{n_points}.laz"
@@ -186,7 +186,7 @@ def add_labelled_args(p: argparse.ArgumentParser, what: str) -> None:
 
 def class_map_of(text: str | None) -> dict[int, int] | None:
     """``"2=ground,64=arch"`` -> ``{2: 1, 64: 4}``; None stays None."""
-    from tiling.classes import class_id
+    from hollowtree.tiling.classes import class_id
 
     if text is None:
         return None
@@ -211,8 +211,8 @@ def read_labelled(path: Path, class_dim: str, instance_dim: str, class_map: dict
         If the file lacks either dimension (the message lists the ones it has) or a
         class is not a hollowtree class id (without ``class_map``).
     """
-    from tiling.classes import NUM_CLASSES
-    from tiling.readers import PointBlock, read_blocks
+    from hollowtree.tiling.classes import NUM_CLASSES
+    from hollowtree.tiling.readers import PointBlock, read_blocks
 
     blocks = PointBlock.concat(read_blocks(path))
     for dim in (class_dim, instance_dim):
@@ -233,14 +233,14 @@ def read_labelled(path: Path, class_dim: str, instance_dim: str, class_map: dict
 
 
 def _segment_file(path: Path) -> np.ndarray:
-    from tiling.readers import PointBlock, read_blocks
+    from hollowtree.tiling.readers import PointBlock, read_blocks
 
     return PointBlock.concat(read_blocks(path)).xyz
 
 
 def _store_segments(path: Path) -> tuple[np.ndarray, list[np.ndarray]]:
     """Coarse segment ids and their points (store-local metres) from ``coarse/csr``."""
-    from tiling.store import RunStore
+    from hollowtree.tiling.store import RunStore
 
     store = RunStore.open(str(path))
     attrs = store.attrs
@@ -283,8 +283,8 @@ def _csr_points_from_tiles(store: Any, path: Path, scale: np.ndarray) -> np.ndar
 
 def cmd_classify(args: argparse.Namespace) -> int:
     """``hollowtree classify``."""
-    from hollownet.predict import Classifier
-    from tiling.classes import ClassId
+    from hollowtree.hollownet.predict import Classifier
+    from hollowtree.tiling.classes import ClassId
 
     path: Path = args.input
     if not path.exists():

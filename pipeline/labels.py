@@ -38,13 +38,13 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.graph import in_child
-from pipeline.tree_stage import MERGE_CLASS_MAP, MERGE_MAP, ROWS
-from tiling.classes import NUM_CLASSES
-from tiling.errors import PipelineError
-from tiling.grid import TileGrid
-from tiling.store import CHUNK_POINTS, RunStore
-from tree.rows import ArcadeCells, apply_cells
+from hollowtree.pipeline.graph import in_child
+from hollowtree.pipeline.tree_stage import MERGE_CLASS_MAP, MERGE_MAP, ROWS
+from hollowtree.tiling.classes import NUM_CLASSES
+from hollowtree.tiling.errors import PipelineError
+from hollowtree.tiling.grid import TileGrid
+from hollowtree.tiling.store import CHUNK_POINTS, RunStore
+from hollowtree.tree.rows import ArcadeCells, apply_cells
 
 __all__ = ["LABEL_DTYPES", "RANGE_ROWS", "PART_ROWS", "LEAF_BITS", "run_labels", "labels_tile", "labels_range",
            "part_rows", "LabelsReport"]

@@ -22,12 +22,12 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.coarse import COARSE_ALGORITHM
-from pipeline.graph import timed_stage
-from pipeline.tree_stage import TREE_ALGORITHM
-from pipeline.workflow import Workflow
-from tiling.classes import CLASS_NAMES
-from tiling.errors import ConfigError
+from hollowtree.pipeline.coarse import COARSE_ALGORITHM
+from hollowtree.pipeline.graph import timed_stage
+from hollowtree.pipeline.tree_stage import TREE_ALGORITHM
+from hollowtree.pipeline.workflow import Workflow
+from hollowtree.tiling.classes import CLASS_NAMES
+from hollowtree.tiling.errors import ConfigError
 
 __all__ = ["run_workflow", "RunReport", "STAGE_ORDER", "changed_stages", "make_synthetic_input"]
 
@@ -46,7 +46,7 @@ class RunReport:
 
 def _input_points(wf: Workflow) -> int:
     """Points in the workflow's input files, from their headers."""
-    from tiling.readers import probe
+    from hollowtree.tiling.readers import probe
 
     return sum(probe(p).point_count for p in wf.input.paths())
 
@@ -96,7 +96,7 @@ def make_synthetic_input(wf: Workflow, *, progress: bool) -> Path | None:
         return None
     from tqdm import tqdm
 
-    from scenes.synth import synth
+    from hollowtree.scenes.synth import synth
 
     path = spec.path()
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -114,7 +114,7 @@ def make_synthetic_input(wf: Workflow, *, progress: bool) -> Path | None:
 
 
 def _class_counts(store: Any) -> dict[str, int]:
-    from pipeline.labels import STAGE as LABELS
+    from hollowtree.pipeline.labels import STAGE as LABELS
 
     counts = np.zeros(len(CLASS_NAMES), dtype=np.int64)
     for info in store.records(LABELS).values():
@@ -149,13 +149,13 @@ def run_workflow(
     dask-kubernetes cluster's) to run the tasks on instead of ``wf.cluster``; it stays
     open. Its workers must import hollowtree and reach the store and the inputs.
     """
-    from pipeline.coarse import CoarseParams, run_coarse
-    from pipeline.graph import fresh_workers, task_runner
-    from pipeline.labels import run_labels
-    from primitives.ransac import RansacParams
-    from tiling.ingest import IngestParams, ingest
-    from tiling.lock import StoreLock
-    from tiling.store import RunStore, check_writable
+    from hollowtree.pipeline.coarse import CoarseParams, run_coarse
+    from hollowtree.pipeline.graph import fresh_workers, task_runner
+    from hollowtree.pipeline.labels import run_labels
+    from hollowtree.primitives.ransac import RansacParams
+    from hollowtree.tiling.ingest import IngestParams, ingest
+    from hollowtree.tiling.lock import StoreLock
+    from hollowtree.tiling.store import RunStore, check_writable
 
     t0 = time.perf_counter()
     url = wf.store
@@ -231,7 +231,7 @@ def run_workflow(
                 if use_tree and crep.tiles_run:  # the coarse tasks' heaps, before torch and HollowNet
                     fresh_workers(runner)
                 if use_tree:
-                    from pipeline.tree_stage import TreeStageParams, run_tree
+                    from hollowtree.pipeline.tree_stage import TreeStageParams, run_tree
 
                     with timed_stage(url, "tree", runner):
                         trep = run_tree(url, TreeStageParams.from_workflow(wf.tree), runner=runner,
@@ -252,7 +252,7 @@ def run_workflow(
                                     "points (no surface or element found: too few, too sparse or too noisy points?); "
                                     "every point keeps class 0")
                 say(report.lines[-1])
-            from pipeline.export import write_outputs
+            from hollowtree.pipeline.export import write_outputs
 
             for line in write_outputs(store, wf, progress=progress):
                 report.lines.append(line)

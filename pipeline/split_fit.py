@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.workflow import shipped_workflows
+from hollowtree.pipeline.workflow import shipped_workflows
 
 __all__ = ["TRAINING_SCENES", "file_groups", "fit_split_from_scenes", "procedural_groups", "training_groups"]
 
@@ -32,7 +32,7 @@ _WORKFLOW = shipped_workflows() / "local.yaml"
 
 
 def _scene(i: int):  # type: ignore[no-untyped-def]
-    from hollownet._scenes import RECIPES, random_scene, storeyed_arcades
+    from hollowtree.hollownet._scenes import RECIPES, random_scene, storeyed_arcades
 
     rng = np.random.default_rng([7, i])
     if i >= 100:
@@ -44,10 +44,10 @@ def _scene(i: int):  # type: ignore[no-untyped-def]
 def _groups_of_scan(laz: Path, work: Path, out: Path, name: str, gt: tuple[np.ndarray, np.ndarray]) -> Path:
     """Ingest and coarse-segment ``laz`` in ``work``; keep its element groups with the
     ground truth ``gt`` (class and instance per record) as ``out``."""
-    from pipeline.run import run_workflow
-    from pipeline.tree_stage import group_starts
-    from pipeline.workflow import load_workflow
-    from tiling.store import RunStore
+    from hollowtree.pipeline.run import run_workflow
+    from hollowtree.pipeline.tree_stage import group_starts
+    from hollowtree.pipeline.workflow import load_workflow
+    from hollowtree.tiling.store import RunStore
 
     url = work / f"{out.stem}.zarr"
     shutil.rmtree(url, ignore_errors=True)
@@ -74,7 +74,7 @@ def _groups_of_scan(laz: Path, work: Path, out: Path, name: str, gt: tuple[np.nd
 def _synthetic_gt(laz: Path) -> tuple[np.ndarray, np.ndarray]:
     """``gt_class`` and ``gt_instance`` of a synthetic scan by record number (the CSR's
     ``coarse/csr/indices``)."""
-    from tiling.readers import probe, read_blocks
+    from hollowtree.tiling.readers import probe, read_blocks
 
     n_rec = probe(laz).point_count
     gc, gi = np.zeros(n_rec, dtype=np.uint8), np.zeros(n_rec, dtype=np.int32)
@@ -86,8 +86,8 @@ def _synthetic_gt(laz: Path) -> tuple[np.ndarray, np.ndarray]:
 
 def training_groups(i: int, work: Path) -> Path:
     """The element groups of training scene ``i`` (made once, then read from ``work``)."""
-    from scenes.scanner import ScanParams
-    from scenes.synth import sidecar_path, write_scan
+    from hollowtree.scenes.scanner import ScanParams
+    from hollowtree.scenes.synth import sidecar_path, write_scan
 
     out = work / f"groups-{i}.npz"
     if out.exists():
@@ -104,8 +104,8 @@ def training_groups(i: int, work: Path) -> Path:
 def check_training_seed(seed: int, what: str) -> None:
     """Raise a ConfigError unless ``seed`` is a training seed of ``scenes.procedural``
     (``what``: the learned part, e.g. "HollowNet is trained")."""
-    from scenes.procedural import SPLITS
-    from tiling.errors import ConfigError
+    from hollowtree.scenes.procedural import SPLITS
+    from hollowtree.tiling.errors import ConfigError
 
     lo, hi = SPLITS["train"]
     if not lo <= seed < hi:
@@ -116,8 +116,8 @@ def check_training_seed(seed: int, what: str) -> None:
 def scan_training_site(seed: int, out: Path, n_points: int) -> None:
     """Scan procedural training site ``seed`` to ``out`` at about ``n_points`` points,
     with the seed's own noise and registration error."""
-    from scenes.procedural import scan_draw
-    from scenes.synth import synth
+    from hollowtree.scenes.procedural import scan_draw
+    from hollowtree.scenes.synth import synth
 
     check_training_seed(seed, "learned parts are fitted")
     d = scan_draw(seed)
@@ -134,7 +134,7 @@ def procedural_groups(seed: int, work: Path, *, n_points: int = 600_000) -> Path
     ConfigError
         If ``seed`` is not a training seed (``scenes.procedural.SPLITS["train"]``).
     """
-    from scenes.synth import sidecar_path
+    from hollowtree.scenes.synth import sidecar_path
 
     check_training_seed(seed, "the split model is fitted")
     out = work / f"groups-gen-{seed}-{n_points}.npz"
@@ -155,7 +155,7 @@ def file_groups(path: Path, work: Path, *, class_dim: str = "gt_class", instance
     import hashlib
     import json
 
-    from pipeline.hollownet_cmd import read_labelled
+    from hollowtree.pipeline.hollownet_cmd import read_labelled
 
     key = hashlib.sha256(json.dumps([str(Path(path).resolve()), Path(path).stat().st_size, class_dim, instance_dim,
                                      sorted((class_map or {}).items())]).encode()).hexdigest()[:12]
@@ -177,9 +177,14 @@ def fit_split_from_scenes(work: Path, *, scenes: tuple[int, ...] = TRAINING_SCEN
                           procedural: tuple[int, ...] = (), procedural_points: int = 600_000):  # type: ignore[no-untyped-def]
     """Make (or reuse) the groups of every scene, procedural training site and labelled
     file in ``work``, collect the proposals, fit. ``scenes=()`` leaves the random scenes out."""
-    from hollownet.predict import Classifier
-    from tiling.errors import ConfigError
-    from tree.fit_split import GOOD_TARGET, SplitSamples, fit_split_model, proposal_samples
+    from hollowtree.hollownet.predict import Classifier
+    from hollowtree.tiling.errors import ConfigError
+    from hollowtree.tree.fit_split import (
+        GOOD_TARGET,
+        SplitSamples,
+        fit_split_model,
+        proposal_samples,
+    )
 
     work.mkdir(parents=True, exist_ok=True)
     clf = Classifier.get(None)

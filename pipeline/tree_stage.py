@@ -39,12 +39,12 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from pipeline.coarse import _read_table, _write_table
-from pipeline.graph import in_child
-from tiling.classes import PLANAR_CLASSES, ClassId
-from tiling.errors import ConfigError, PipelineError
-from tiling.store import RunStore
-from tree.tall import short_minarets, size_rules, slender_domes
+from hollowtree.pipeline.coarse import _read_table, _write_table
+from hollowtree.pipeline.graph import in_child
+from hollowtree.tiling.classes import PLANAR_CLASSES, ClassId
+from hollowtree.tiling.errors import ConfigError, PipelineError
+from hollowtree.tiling.store import RunStore
+from hollowtree.tree.tall import short_minarets, size_rules, slender_domes
 
 __all__ = ["TreeStageParams", "tree_batch", "run_tree", "TreeReport", "plan_batches", "group_starts"]
 
@@ -209,7 +209,7 @@ def _device(device: str) -> str:
 def _load_classifier(weights: str | None, device: str = "cpu") -> None:
     """Load HollowNet in this process as :func:`tree_batch` will use it (the worker's, before
     it forks a batch's child: ``pipeline.graph.in_child``)."""
-    from hollownet.predict import Classifier
+    from hollowtree.hollownet.predict import Classifier
 
     Classifier.get(weights, device=_device(device), num_threads=_worker_threads())
 
@@ -249,9 +249,9 @@ def _group_tree(pts: np.ndarray, s: int, params: TreeStageParams, clf: Any, grou
     """The tree of one element group (its points ``pts``, store-local metres; ``s``: its
     first segment, 0-based): per-point leaf, class, instance (numbered from ``n_inst + 1``)
     and score, the node table's columns and the new instance count."""
-    from tree.build import build_tree
-    from tree.ground import ground_or_roof
-    from tree.split import load_split_model
+    from hollowtree.tree.build import build_tree
+    from hollowtree.tree.ground import ground_or_roof
+    from hollowtree.tree.split import load_split_model
 
     center = pts.mean(axis=0)
     # The size rules of tree/tall.py, with the local ground in the tree's (centred) coordinates.
@@ -347,7 +347,7 @@ def _write_samples(store: RunStore, b: int, xyz: np.ndarray, values: dict[str, n
     every wall instance's (``WALL_SAMPLE_POINTS``) (``tree/samples/<b>``: batch-local
     instance, store-local metres, points per sampled point, class), for the arcade rows
     (tree/rows.py) and the frames (tree/frames.py)."""
-    from tree.rows import instance_sample
+    from hollowtree.tree.rows import instance_sample
 
     rng = np.random.default_rng(np.random.SeedSequence([seed, s + 1, 2]))
     parts = [instance_sample(xyz, values["instance"], values["class"], rng),
@@ -368,7 +368,7 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
     (a group takes its segments' lowest). A batch of one group above ``max_group_points``
     is built on a sample of it (:func:`_sampled_group_tree`).
     """
-    from hollownet.predict import Classifier
+    from hollowtree.hollownet.predict import Classifier
 
     store = RunStore.open(url, mode="a")
     params = TreeStageParams(**cfg["params"])
@@ -429,7 +429,7 @@ class TreeReport:
 def _ground_levels(store: RunStore) -> np.ndarray:
     """Local ground level of every global segment (row g-1 for segment g), in the
     store's coordinates, from the coarse segment table's bounding boxes."""
-    from tree.ground import ground_levels
+    from hollowtree.tree.ground import ground_levels
 
     t = _read_table(store, "coarse/segments.parquet")
     cols = {c: np.asarray(t.column(c).to_numpy(), dtype=np.float64)
@@ -527,8 +527,8 @@ def _arcade_rows(store: RunStore, n_batches: int, inst_offsets: np.ndarray, imap
     bays). Then the frames (tree/frames.py) of the arch instances in no row: a face joins
     its passage (``imap``; a wall face takes class arch in ``cmap``), and a lone piece's
     cell follows the rows' cells."""
-    from tree.frames import frame_cells
-    from tree.rows import ArcadeCells, arcade_cells
+    from hollowtree.tree.frames import frame_cells
+    from hollowtree.tree.rows import ArcadeCells, arcade_cells
 
     arch, dome, wall = int(ClassId.ARCH), int(ClassId.DOME), int(ClassId.WALL)
     parts: dict[int, dict[int, list[tuple[np.ndarray, np.ndarray]]]] = {arch: {}, dome: {}, wall: {}}
@@ -566,7 +566,7 @@ def _arcade_rows(store: RunStore, n_batches: int, inst_offsets: np.ndarray, imap
 def _merge_map(nodes: pa.Table | None, n_instances: int) -> tuple[np.ndarray, np.ndarray]:
     """The instance map of :func:`tree.merge.merge_instances` over every instance node, and
     the class of every instance after it (:func:`tree.merge.merged_classes`)."""
-    from tree.merge import merge_instances, merged_classes
+    from hollowtree.tree.merge import merge_instances, merged_classes
 
     if nodes is None or nodes.num_rows == 0:
         return np.arange(n_instances + 1, dtype=np.uint32), np.zeros(n_instances + 1, dtype=np.uint8)

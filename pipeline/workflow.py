@@ -24,7 +24,7 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from tiling.errors import ConfigError
+from hollowtree.tiling.errors import ConfigError
 
 __all__ = ["Workflow", "WorkflowError", "load_workflow", "json_schema", "apply_override", "shipped_workflows"]
 
@@ -53,7 +53,7 @@ class SynthInput(_Section):
     @field_validator("site")
     @classmethod
     def _known_site(cls, v: str) -> str:
-        from scenes.sites import scene_names
+        from hollowtree.scenes.sites import scene_names
 
         names = scene_names()
         if v not in names:
@@ -99,7 +99,7 @@ class IngestSection(_Section):
     @field_validator("units")
     @classmethod
     def _unit_known(cls, v: float | str | None) -> float | str | None:
-        from tiling.readers import UNIT_METRES
+        from hollowtree.tiling.readers import UNIT_METRES
 
         if isinstance(v, str) and v.lower() not in UNIT_METRES:
             raise ValueError(f"{v!r} is not a unit this knows ({', '.join(sorted(UNIT_METRES))}); give metres per unit")
@@ -359,13 +359,13 @@ def load_workflow(path: str | Path, overrides: Sequence[str] = (), *, check_file
 
 def shipped_workflows() -> Path:
     """The folder of the example workflows: ``workflows/`` of a source checkout, or the
-    copy a wheel installs as ``pipeline/workflows``."""
+    copy a wheel installs as ``hollowtree/workflows``."""
     repo = Path(__file__).resolve().parents[1] / "workflows"
     if (repo / "local.yaml").is_file():
         return repo
     from importlib.resources import files
 
-    return Path(str(files("pipeline.workflows").joinpath("local.yaml"))).parent
+    return Path(str(files("hollowtree.workflows").joinpath("local.yaml"))).parent
 
 
 def schema_text() -> str:

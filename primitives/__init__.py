@@ -12,11 +12,11 @@
 The per-tile Dask task and the stitching of a run store are in ``pipeline/coarse.py``.
 """
 
-from primitives.dbscan import dbscan_labels, dbscan_segments, default_eps, window_spacing
-from primitives.normals import NormalResult, estimate_normals
-from primitives.ransac import RansacParams, RansacResult, efficient_ransac
-from primitives.shapes import FailedFit, PrimitiveFit
-from primitives.stitch import StitchResult, UnionFind, csr_by_segment, stitch_segments
+from hollowtree.primitives.dbscan import dbscan_labels, dbscan_segments, default_eps, window_spacing
+from hollowtree.primitives.normals import NormalResult, estimate_normals
+from hollowtree.primitives.ransac import RansacParams, RansacResult, efficient_ransac
+from hollowtree.primitives.shapes import FailedFit, PrimitiveFit
+from hollowtree.primitives.stitch import StitchResult, UnionFind, csr_by_segment, stitch_segments
 
 __all__ = [
     "FailedFit",

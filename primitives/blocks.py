@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from tiling.errors import ConfigError
+from hollowtree.tiling.errors import ConfigError
 
 __all__ = ["split_blocks", "block_context"]
 

@@ -82,14 +82,14 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from primitives.score import (
+from hollowtree.primitives.score import (
     FUSED_KINDS,
     PointColumns,
     compatible_counts,
     compatible_mask,
     shared_hits,
 )
-from primitives.shapes import (
+from hollowtree.primitives.shapes import (
     DEFAULT_KINDS,
     KINDS,
     MINIMAL_SET_SIZE,
@@ -102,8 +102,8 @@ from primitives.shapes import (
     surface_coordinates,
     to_fit,
 )
-from tiling.columns import column_max, column_min, column_span
-from tiling.errors import ConfigError
+from hollowtree.tiling.columns import column_max, column_min, column_span
+from hollowtree.tiling.errors import ConfigError
 
 __all__ = ["RansacParams", "RansacResult", "efficient_ransac"]
 

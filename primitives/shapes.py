@@ -43,7 +43,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import least_squares
 
-from primitives.torus import (
+from hollowtree.primitives.torus import (
     torus_distance_and_cosine,
     torus_from_minimal_sets,
     torus_residuals,

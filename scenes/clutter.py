@@ -5,8 +5,8 @@ Re-exported by :mod:`scenes.elements`.
 
 from __future__ import annotations
 
-from scenes.mesh import TriMesh, concat_meshes
-from scenes.shapes import box, ellipsoid, frustum, revolve
+from hollowtree.scenes.mesh import TriMesh, concat_meshes
+from hollowtree.scenes.shapes import box, ellipsoid, frustum, revolve
 
 __all__ = ["bench", "bicycle", "car", "place", "tree"]
 

@@ -16,9 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from scenes.clutter import bench, bicycle, car, place, tree
-from scenes.mesh import TriMesh, concat_meshes
-from scenes.shapes import (
+from hollowtree.scenes.clutter import bench, bicycle, car, place, tree
+from hollowtree.scenes.mesh import TriMesh, concat_meshes
+from hollowtree.scenes.shapes import (
     ArcPath,
     StraightPath,
     WallPath,

@@ -28,13 +28,22 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from scenes._builders import EYE, Jitter, add_arcade, add_clutter
-from scenes.elements import arcade, chattri, dome, ground, minaret, pillar, roof_slab, wall
-from scenes.scanner import RayCaster, ScanParams, estimate_step, scan
-from scenes.scene import Scene, SceneBuilder
-from scenes.shapes import ArcPath, StraightPath
-from tiling.classes import ClassId
-from tiling.errors import ConfigError
+from hollowtree.scenes._builders import EYE, Jitter, add_arcade, add_clutter
+from hollowtree.scenes.elements import (
+    arcade,
+    chattri,
+    dome,
+    ground,
+    minaret,
+    pillar,
+    roof_slab,
+    wall,
+)
+from hollowtree.scenes.scanner import RayCaster, ScanParams, estimate_step, scan
+from hollowtree.scenes.scene import Scene, SceneBuilder
+from hollowtree.scenes.shapes import ArcPath, StraightPath
+from hollowtree.tiling.classes import ClassId
+from hollowtree.tiling.errors import ConfigError
 
 __all__ = ["DEGENERATE_KINDS", "ELEMENT_KINDS", "FuzzSpec", "fuzz_points", "fuzz_scene", "fuzz_specs"]
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from scenes._builders import (
+from hollowtree.scenes._builders import (
     Jitter,
     RngLike,
     add_arcade,
@@ -22,7 +22,7 @@ from scenes._builders import (
     room,
     wall_piece,
 )
-from scenes.elements import (
+from hollowtree.scenes.elements import (
     arcade,
     bastion,
     chattri,
@@ -31,9 +31,9 @@ from scenes.elements import (
     portal,
     roof_slab,
 )
-from scenes.scene import Scene, SceneBuilder
-from scenes.shapes import ArcPath, StraightPath, slab, wall_panel
-from tiling.classes import ClassId
+from hollowtree.scenes.scene import Scene, SceneBuilder
+from hollowtree.scenes.shapes import ArcPath, StraightPath, slab, wall_panel
+from hollowtree.tiling.classes import ClassId
 
 __all__ = ["derawar", "khudabad", "roman", "temple", "wazir_khan"]
 

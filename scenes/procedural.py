@@ -48,14 +48,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scenes._builders import EYE
-from scenes.clutter import bench, bicycle, car, tree
-from scenes.elements import arcade, bastion, dome, ground, minaret, pillar, portal, roof_slab, wall
-from scenes.mesh import TriMesh, concat_meshes
-from scenes.scene import Scene, SceneBuilder
-from scenes.shapes import ArcPath, StraightPath, box, ellipsoid, frustum
-from tiling.classes import ClassId
-from tiling.errors import ConfigError
+from hollowtree.scenes._builders import EYE
+from hollowtree.scenes.clutter import bench, bicycle, car, tree
+from hollowtree.scenes.elements import (
+    arcade,
+    bastion,
+    dome,
+    ground,
+    minaret,
+    pillar,
+    portal,
+    roof_slab,
+    wall,
+)
+from hollowtree.scenes.mesh import TriMesh, concat_meshes
+from hollowtree.scenes.scene import Scene, SceneBuilder
+from hollowtree.scenes.shapes import ArcPath, StraightPath, box, ellipsoid, frustum
+from hollowtree.tiling.classes import ClassId
+from hollowtree.tiling.errors import ConfigError
 
 __all__ = ["FAMILIES", "SPLITS", "ScanDraw", "family_of", "procedural_site", "scan_draw", "split_seeds"]
 

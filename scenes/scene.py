@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from scenes.mesh import TriMesh, concat_meshes
-from tiling.classes import ELEMENT_CLASSES, ClassId
+from hollowtree.scenes.mesh import TriMesh, concat_meshes
+from hollowtree.tiling.classes import ELEMENT_CLASSES, ClassId
 
 __all__ = ["Element", "Scene", "SceneBuilder"]
 
@@ -85,7 +85,7 @@ class SceneBuilder:
 
     Examples
     --------
-    >>> from scenes.mesh import TriMesh
+    >>> from hollowtree.scenes.mesh import TriMesh
     >>> b = SceneBuilder("toy")
     >>> tri = TriMesh(np.eye(3), np.array([[0, 1, 2]]))
     >>> i = b.add(tri, ClassId.PILLAR, "pillar 1")

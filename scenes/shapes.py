@@ -22,7 +22,7 @@ import mapbox_earcut
 import numpy as np
 import numpy.typing as npt
 
-from scenes.mesh import TriMesh, concat_meshes
+from hollowtree.scenes.mesh import TriMesh, concat_meshes
 
 __all__ = [
     "ArcPath",

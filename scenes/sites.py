@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from scenes._builders import (
+from hollowtree.scenes._builders import (
     EYE,
     Jitter,
     RngLike,
@@ -39,7 +39,7 @@ from scenes._builders import (
     room,
     wall_piece,
 )
-from scenes.elements import (
+from hollowtree.scenes.elements import (
     arcade,
     bastion,
     chattri,
@@ -50,9 +50,9 @@ from scenes.elements import (
     roof_slab,
     wall,
 )
-from scenes.scene import Scene, SceneBuilder
-from scenes.shapes import ArcPath, StraightPath
-from tiling.classes import ClassId
+from hollowtree.scenes.scene import Scene, SceneBuilder
+from hollowtree.scenes.shapes import ArcPath, StraightPath
+from hollowtree.tiling.classes import ClassId
 
 __all__ = ["GENERATED", "SITES", "TEST_SCENES", "SiteSpec", "UnknownSceneError", "build_scene", "scene_names"]
 
@@ -224,7 +224,7 @@ def _occluded_scene(rng: RngLike) -> Scene:
 
 
 # --------------------------------------------------------------------------- sites
-from scenes.paper_sites import derawar, khudabad, roman, temple, wazir_khan  # noqa: E402
+from hollowtree.scenes.paper_sites import derawar, khudabad, roman, temple, wazir_khan  # noqa: E402
 
 SITES: dict[str, SiteSpec] = {
     "wazir_khan": SiteSpec(
@@ -307,7 +307,7 @@ TEST_SCENES: dict[str, SiteSpec] = {
 
 
 def _generated(family: str | None) -> SiteSpec:
-    from scenes.procedural import procedural_site
+    from hollowtree.scenes.procedural import procedural_site
 
     def build(rng: RngLike) -> Scene:
         seed = rng if isinstance(rng, (int, np.integer)) else (
@@ -321,7 +321,7 @@ def _generated(family: str | None) -> SiteSpec:
 
 
 def _generated_specs() -> dict[str, SiteSpec]:
-    from scenes.procedural import FAMILIES
+    from hollowtree.scenes.procedural import FAMILIES
 
     specs = [_generated(None), *(_generated(f) for f in FAMILIES)]
     return {s.name: s for s in specs}

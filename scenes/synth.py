@@ -29,7 +29,7 @@ import numpy.typing as npt
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from scenes.scanner import (
+from hollowtree.scenes.scanner import (
     RayCaster,
     ScanParams,
     count_rays,
@@ -37,10 +37,10 @@ from scenes.scanner import (
     scan,
     station_poses,
 )
-from scenes.scene import Scene
-from scenes.sites import GENERATED, SITES, TEST_SCENES, SiteSpec, build_scene
-from tiling.classes import ELEMENT_CLASSES, NUM_CLASSES, ClassId
-from tiling.errors import ConfigError, InputFileError, OutputExistsError
+from hollowtree.scenes.scene import Scene
+from hollowtree.scenes.sites import GENERATED, SITES, TEST_SCENES, SiteSpec, build_scene
+from hollowtree.tiling.classes import ELEMENT_CLASSES, NUM_CLASSES, ClassId
+from hollowtree.tiling.errors import ConfigError, InputFileError, OutputExistsError
 
 __all__ = [
     "SURVEY_ORIGIN",

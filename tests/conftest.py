@@ -8,7 +8,7 @@ import laspy
 import numpy as np
 import pytest
 
-from scenes.synth import read_scan_metadata, synth
+from hollowtree.scenes.synth import read_scan_metadata, synth
 
 REPO = Path(__file__).resolve().parents[1]
 EXTERNAL = REPO.parent / "shared" / "data" / "external"

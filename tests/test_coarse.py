@@ -12,15 +12,15 @@ import pyarrow.parquet as pq
 import pytest
 from sklearn.metrics import adjusted_rand_score
 
-from pipeline.cli import main
-from pipeline.coarse import FALLBACK_EPS, CoarseParams, run_coarse
-from pipeline.graph import task_runner
-from pipeline.tree_stage import group_starts
-from primitives.dbscan import window_spacing
-from scenes.synth import synth
-from tiling.errors import ConfigError
-from tiling.ingest import IngestParams, ingest
-from tiling.store import RunStore
+from hollowtree.pipeline.cli import main
+from hollowtree.pipeline.coarse import FALLBACK_EPS, CoarseParams, run_coarse
+from hollowtree.pipeline.graph import task_runner
+from hollowtree.pipeline.tree_stage import group_starts
+from hollowtree.primitives.dbscan import window_spacing
+from hollowtree.scenes.synth import synth
+from hollowtree.tiling.errors import ConfigError
+from hollowtree.tiling.ingest import IngestParams, ingest
+from hollowtree.tiling.store import RunStore
 
 PARAMS = CoarseParams(eps=0.3)
 
@@ -124,7 +124,7 @@ def test_block_split_holds_no_copy_of_the_coordinates():
     7.9 M-row tile costs less than a block task."""
     import tracemalloc
 
-    from primitives.blocks import split_blocks
+    from hollowtree.primitives.blocks import split_blocks
 
     xy = np.random.default_rng(0).random((400_000, 2)) * [30.0, 20.0]
     for a in (xy, (xy * 1e6).astype(np.int32)):
@@ -143,7 +143,7 @@ def test_blocks_of_stored_integers_are_those_of_their_metres():
     """plan_blocks splits a tile's stored integers with their scale: the blocks and the
     rectangles are those of the metres (integers times scale, in float64) to the bit,
     with ties on the median and a scale of its own per axis."""
-    from primitives.blocks import split_blocks
+    from hollowtree.primitives.blocks import split_blocks
 
     rng = np.random.default_rng(1)
     for scale in ([0.001, 0.001], [0.00025, 0.0005], [0.01, 0.003]):
@@ -165,8 +165,8 @@ def test_a_block_with_a_dense_context_is_cut_again():
     """A block whose context (own points and those within the margin) holds more than
     CONTEXT_FACTOR * block_points is split again while it owns more than a quarter of
     block_points; blocks with a small context are split_blocks' own, numbers included."""
-    from pipeline.coarse import CONTEXT_FACTOR, _block_inputs
-    from primitives.blocks import block_context, split_blocks
+    from hollowtree.pipeline.coarse import CONTEXT_FACTOR, _block_inputs
+    from hollowtree.primitives.blocks import block_context, split_blocks
 
     xy = np.random.default_rng(3).random((20_000, 2)) * 10.0
     cap = 10_000
@@ -235,7 +235,7 @@ def _true_spacing_quantile(store: Path, q: float) -> float:
 def test_automatic_eps_follows_the_scan_spacing_not_the_tiles(scan, tiled20, tmp_path):
     """The automatic eps is EPS_FACTOR x the 25 % spacing quantile measured on windows of
     the scan; it matches the spacing of all points and does not move with the tile size."""
-    from pipeline.coarse import EPS_FACTOR, EPS_QUANTILE, scan_spacing
+    from hollowtree.pipeline.coarse import EPS_FACTOR, EPS_QUANTILE, scan_spacing
 
     store = tiled20[1]
     s = RunStore.open(store)
@@ -401,7 +401,7 @@ def test_stacked_stages_are_one_group(scan, untiled_run, tmp_path):
 def test_sparse_pass_segments_a_far_thin_surface():
     """A wall scanned 10x sparser than the ground that sets eps is segmented only by the
     sparse pass (``sparse_factor``); the dense ground is segmented either way."""
-    from pipeline.coarse import _segment_points
+    from hollowtree.pipeline.coarse import _segment_points
 
     rng = np.random.default_rng(1)
     ground = np.c_[rng.uniform(0, 20, (160_000, 2)), rng.normal(0, 0.002, 160_000)]  # 0.05 m
@@ -423,7 +423,7 @@ def test_sparse_pass_segments_a_far_thin_surface():
 def test_sparse_part_of_a_plane_joins_its_dense_part():
     """Ground scanned densely near the station and sparsely beyond is one segment: the
     sparse pass's plane is joined to the first pass's where they touch and agree."""
-    from pipeline.coarse import _segment_points
+    from hollowtree.pipeline.coarse import _segment_points
 
     rng = np.random.default_rng(2)
     near = np.c_[rng.uniform(0, 20, (160_000, 2)), rng.normal(0, 0.002, 160_000)]  # 0.05 m
@@ -439,7 +439,13 @@ def test_block_tasks_equal_the_in_process_blocks(blocked8k):
     """run_coarse runs the blocks of a dense tile as tasks of their own and joins them in a
     second round: the tile's segments equal those of the in-process loop, point by point,
     and the blocks' inputs and intermediate results are gone once the tile is recorded."""
-    from pipeline.coarse import BLOCK_STAGE, PLAN_STAGE, _margin, _segment_tile, _tile_points
+    from hollowtree.pipeline.coarse import (
+        BLOCK_STAGE,
+        PLAN_STAGE,
+        _margin,
+        _segment_tile,
+        _tile_points,
+    )
 
     s = RunStore.open(blocked8k[1])
     stage = s.attrs["stages"]["coarse"]
@@ -463,8 +469,8 @@ def test_block_tasks_equal_the_in_process_blocks(blocked8k):
 def test_tile_tables_and_contacts_read_a_piece_at_a_time(scan, tmp_path, monkeypatch):
     """A tile's table and contacts are taken READ_ROWS rows at a time (so a dense tile's
     join holds no coordinates): they equal those of the whole tile's points at once."""
-    import pipeline.coarse as coarse
-    from primitives.group import segment_contacts
+    import hollowtree.pipeline.coarse as coarse
+    from hollowtree.primitives.group import segment_contacts
 
     monkeypatch.setattr(coarse, "READ_ROWS", 997)
     store_path = tmp_path / "s"
@@ -498,7 +504,7 @@ def test_tile_tables_and_contacts_read_a_piece_at_a_time(scan, tmp_path, monkeyp
 def test_stitch_reads_a_piece_at_a_time(tiled20, tmp_path, monkeypatch):
     """The stitch reads tiles READ_ROWS rows at a time and matches buffer rows only to core
     rows near a tile's edge: the global ids, CSR and table equal those of whole tiles."""
-    import pipeline.coarse as coarse
+    import hollowtree.pipeline.coarse as coarse
 
     store_path = tmp_path / "s"
     shutil.copytree(tiled20[1], store_path)  # the shared store stays as it is
@@ -532,7 +538,7 @@ def test_stitch_reads_a_piece_at_a_time(tiled20, tmp_path, monkeypatch):
 def test_interrupted_block_tasks_resume(scan, blocked8k, tmp_path):
     """A run stopped after some block tasks resumes: planned tiles are not cut again,
     recorded blocks are not run again, and the answer is that of an uninterrupted run."""
-    from pipeline.coarse import plan_blocks
+    from hollowtree.pipeline.coarse import plan_blocks
 
     params = BLOCKED
     whole = blocked8k[0]
@@ -580,7 +586,7 @@ def test_segment_points_holds_no_copy_of_the_points():
     275 now)."""
     import tracemalloc
 
-    from pipeline.coarse import _segment_points
+    from hollowtree.pipeline.coarse import _segment_points
 
     rng = np.random.default_rng(0)
     n = 200_000

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tiling.columns import column_max, column_min, column_span
+from hollowtree.tiling.columns import column_max, column_min, column_span
 
 
 @pytest.mark.parametrize("k", [1, 2, 3, 5])

@@ -11,20 +11,20 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.run import run_workflow
-from pipeline.workflow import load_workflow
-from scenes.metrics import count_labels, score_counts
-from tiling.classes import ClassId
-from tiling.readers import PointBlock, read_blocks
-from tiling.store import RunStore
+from hollowtree.pipeline.run import run_workflow
+from hollowtree.pipeline.workflow import load_workflow
+from hollowtree.scenes.metrics import count_labels, score_counts
+from hollowtree.tiling.classes import ClassId
+from hollowtree.tiling.readers import PointBlock, read_blocks
+from hollowtree.tiling.store import RunStore
 
 
 @pytest.fixture(scope="module")
 def pavilion(tmp_path_factory):
-    from scenes.elements import ground
-    from scenes.procedural import _pavilion, _Site
-    from scenes.scanner import ScanParams
-    from scenes.synth import write_scan
+    from hollowtree.scenes.elements import ground
+    from hollowtree.scenes.procedural import _pavilion, _Site
+    from hollowtree.scenes.scanner import ScanParams
+    from hollowtree.scenes.synth import write_scan
 
     s = _Site("pavilion", np.random.default_rng(11))
     _pavilion(s, 0.0, 0.0, "pavilion", size=2.0, z0=0.0)
@@ -51,11 +51,11 @@ def _pillars_found(tmp_path, scan) -> tuple[int, int]:
 
 
 def test_a_pavilion_gives_up_its_columns(tmp_path, pavilion, monkeypatch):
-    import tree.build
+    import hollowtree.tree.build as build
 
     found, n_gt = _pillars_found(tmp_path / "posts", pavilion)
     assert n_gt >= 4
-    monkeypatch.setattr(tree.build, "POSTS_FROM", ())
+    monkeypatch.setattr(build, "POSTS_FROM", ())
     found_whole, _ = _pillars_found(tmp_path / "whole", pavilion)
     assert found >= n_gt // 2
     assert found > found_whole

@@ -8,15 +8,15 @@ from sklearn.cluster import DBSCAN
 from sklearn.datasets import make_blobs
 from sklearn.metrics import adjusted_rand_score
 
-import primitives.dbscan as dbscan_module
-from primitives.dbscan import (
+import hollowtree.primitives.dbscan as dbscan_module
+from hollowtree.primitives.dbscan import (
     dbscan_labels,
     dbscan_segments,
     default_eps,
     sparse_points,
     window_spacing,
 )
-from tiling.errors import ConfigError
+from hollowtree.tiling.errors import ConfigError
 
 
 def _on_x(xs: list[float]) -> np.ndarray:

@@ -16,14 +16,20 @@ import laspy
 import numpy as np
 import pytest
 
-from scenes.metrics import Evaluation, LabelCounts, count_labels, evaluate_labels, score_counts
+from hollowtree.scenes.metrics import (
+    Evaluation,
+    LabelCounts,
+    count_labels,
+    evaluate_labels,
+    score_counts,
+)
 
 REPO = Path(__file__).resolve().parents[1]
 ARCH, DOME, MINARET, PILLAR, WALL, GROUND = 4, 5, 6, 7, 2, 1
 
 
 def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pipeline.cli", *args], capture_output=True, text=True, cwd=cwd)
+    return subprocess.run([sys.executable, "-m", "hollowtree", *args], capture_output=True, text=True, cwd=cwd)
 
 
 # ------------------------------------------------------------------------------ kernels
@@ -228,7 +234,7 @@ def test_evaluate_seeds_runs_each_input_once_per_seed(evaluated):
 
 
 def test_seed_spread_by_hand():
-    from pipeline.evaluate import SiteResult, format_spread, seed_spread
+    from hollowtree.pipeline.evaluate import SiteResult, format_spread, seed_spread
 
     gc = np.array([GROUND] * 4 + [DOME] * 4 + [DOME] * 4)
     gi = np.array([1] * 4 + [2] * 4 + [3] * 4)
@@ -298,8 +304,8 @@ def test_las_without_ground_truth_is_one_line_exit_2(tmp_path):
 
 
 def test_inputs_are_planned_before_anything_runs(tmp_path):
-    from pipeline.evaluate import _plan
-    from scenes.synth import synth
+    from hollowtree.pipeline.evaluate import _plan
+    from hollowtree.scenes.synth import synth
 
     scan = tmp_path / "pillar.laz"
     synth("pillar", scan, n_points=3000, seed=1)
@@ -319,7 +325,7 @@ def test_unknown_input_is_one_line_exit_2(tmp_path):
 
 
 def test_loss_buckets_names_where_each_element_was_lost():
-    from scenes.metrics import loss_buckets
+    from hollowtree.scenes.metrics import loss_buckets
 
     # Six dome elements (class 5) of 10 points each and 40 wall points (class 2), then
     # labels that lose each dome in a different way.

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, Phase, example, given, seed, settings
 
-from pipeline.fuzz import run_fuzz, write_points
-from scenes.fuzz import DEGENERATE_KINDS, FuzzSpec, fuzz_specs
+from hollowtree.pipeline.fuzz import run_fuzz, write_points
+from hollowtree.scenes.fuzz import DEGENERATE_KINDS, FuzzSpec, fuzz_specs
 
 pytestmark = pytest.mark.slow
 
@@ -59,7 +59,7 @@ def test_a_file_with_no_point_is_refused_in_one_line(tmp_path):
                         "gt_instance": np.zeros(0, np.uint32)})
     wf = tmp_path / "wf.yaml"
     wf.write_text(f"input: {{files: [{scan}]}}\nstore: {tmp_path / 's.zarr'}\ncluster: {{scheduler: sync}}\n")
-    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "run", str(wf), "--no-progress"],
+    proc = subprocess.run([sys.executable, "-m", "hollowtree", "run", str(wf), "--no-progress"],
                           capture_output=True, text=True)
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == [f"hollowtree run: error: {scan}: holds no points"]

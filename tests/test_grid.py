@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tiling.errors import ConfigError
-from tiling.grid import TileGrid, morton_order
+from hollowtree.tiling.errors import ConfigError
+from hollowtree.tiling.grid import TileGrid, morton_order
 
 # -- strategies -----------------------------------------------------------------------------
 

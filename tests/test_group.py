@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.coarse import CoarseParams
-from primitives.group import (
+from hollowtree.pipeline.coarse import CoarseParams
+from hollowtree.primitives.group import (
     box_plane_distance,
     large_segments,
     segment_contacts,
@@ -14,7 +14,7 @@ from primitives.group import (
     set_in_plane,
     stacked_pairs,
 )
-from tiling.errors import ConfigError
+from hollowtree.tiling.errors import ConfigError
 
 
 def _ring(n: int, r: float, z: float, rng: np.random.Generator) -> np.ndarray:

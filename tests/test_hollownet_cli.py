@@ -8,15 +8,15 @@ import numpy as np
 import pytest
 from plyfile import PlyData, PlyElement
 
-from pipeline.cli import main
-from pipeline.cli import main as hollowtree
-from pipeline.coarse import CoarseParams, run_coarse
-from pipeline.graph import task_runner
-from pipeline.hollownet_cmd import _csr_points_from_tiles
-from scenes.synth import synth
-from tiling.classes import CLASS_NAMES
-from tiling.ingest import IngestParams, ingest
-from tiling.store import RunStore
+from hollowtree.pipeline.cli import main
+from hollowtree.pipeline.cli import main as hollowtree
+from hollowtree.pipeline.coarse import CoarseParams, run_coarse
+from hollowtree.pipeline.graph import task_runner
+from hollowtree.pipeline.hollownet_cmd import _csr_points_from_tiles
+from hollowtree.scenes.synth import synth
+from hollowtree.tiling.classes import CLASS_NAMES
+from hollowtree.tiling.ingest import IngestParams, ingest
+from hollowtree.tiling.store import RunStore
 
 
 def _write_ply(path, xyz):

@@ -7,7 +7,7 @@ import json
 import pytest
 import torch
 
-from hollownet.model import (
+from hollowtree.hollownet.model import (
     DEFAULT_WEIGHTS,
     NUM_OUTPUTS,
     OUTPUT_CLASSES,
@@ -18,8 +18,8 @@ from hollownet.model import (
     load_model,
     save_checkpoint,
 )
-from tiling.classes import ELEMENT_CLASSES, NUM_CLASSES, PLANAR_CLASSES, ClassId
-from tiling.errors import InputFileError
+from hollowtree.tiling.classes import ELEMENT_CLASSES, NUM_CLASSES, PLANAR_CLASSES, ClassId
+from hollowtree.tiling.errors import InputFileError
 
 
 def test_k_comes_from_the_vocabulary():

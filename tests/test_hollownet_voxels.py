@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hollownet.voxels import (
+from hollowtree.hollownet.voxels import (
     EMPTY,
     OCCUPIED,
     DegenerateSegmentError,
@@ -13,7 +13,7 @@ from hollownet.voxels import (
     voxelize,
     voxelize_batch,
 )
-from tiling.errors import PipelineError
+from hollowtree.tiling.errors import PipelineError
 
 
 def _box_surface(rng, n, size=(2.0, 1.0, 1.0)) -> np.ndarray:

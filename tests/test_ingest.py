@@ -14,12 +14,12 @@ import laspy
 import numpy as np
 import pytest
 
-from pipeline.cli import main
-from pipeline.graph import task_runner
-from scenes.synth import synth
-from tiling.grid import TileGrid
-from tiling.ingest import IngestParams, ingest
-from tiling.store import RunStore, StoreError
+from hollowtree.pipeline.cli import main
+from hollowtree.pipeline.graph import task_runner
+from hollowtree.scenes.synth import synth
+from hollowtree.tiling.grid import TileGrid
+from hollowtree.tiling.ingest import IngestParams, ingest
+from hollowtree.tiling.store import RunStore, StoreError
 
 
 @pytest.fixture(scope="module")
@@ -136,7 +136,7 @@ def test_voxel_downsampling_maps_every_dropped_point(scan_file, tmp_path):
 def test_voxel_representatives_match_the_lexicographic_sort(spread, sorted_index):
     """The packed-key sort (index increasing, ranges within 63 bits) and the lexicographic
     fallback give the same keep-mask and representatives as a plain lexsort."""
-    from tiling.ingest import _voxel_representatives
+    from hollowtree.tiling.ingest import _voxel_representatives
 
     rng = np.random.default_rng(spread)
     n = 20_000
@@ -182,7 +182,7 @@ def test_bbox_with_chunks_that_miss_the_box(scan_file, tmp_path):
 
 
 def _run_cli(scan_file, store, *extra):
-    return [sys.executable, "-m", "pipeline.cli", "ingest", str(scan_file), "--store", str(store),
+    return [sys.executable, "-m", "hollowtree", "ingest", str(scan_file), "--store", str(store),
             "--tile-size", "8", "--buffer", "0.5", "--chunk-size", "5000", "--scheduler", "sync",
             "--no-progress", *extra]
 
@@ -337,10 +337,10 @@ def test_cli_default_thread_cluster_gives_the_same_store(scan_file, tmp_path):
     """`hollowtree ingest` without --scheduler runs its tasks on worker threads in its own
     process (and tunes that process); the store equals an in-process sync run's."""
     common = [str(scan_file), "--tile-size", "10", "--buffer", "1", "--chunk-size", "20000", "--no-progress"]
-    sync = subprocess.run([sys.executable, "-m", "pipeline.cli", "ingest", "--store", str(tmp_path / "sync"),
+    sync = subprocess.run([sys.executable, "-m", "hollowtree", "ingest", "--store", str(tmp_path / "sync"),
                            "--scheduler", "sync", *common], capture_output=True, text=True)
     assert sync.returncode == 0, sync.stderr
-    threads = subprocess.run([sys.executable, "-m", "pipeline.cli", "ingest", "--store", str(tmp_path / "thr"),
+    threads = subprocess.run([sys.executable, "-m", "hollowtree", "ingest", "--store", str(tmp_path / "thr"),
                               *common], capture_output=True, text=True)
     assert threads.returncode == 0, threads.stderr
     a, b = _tiles(tmp_path / "sync"), _tiles(tmp_path / "thr")

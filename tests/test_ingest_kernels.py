@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tiling.grid import TileGrid, morton_order
-from tiling.kernels import morton_index_order, quantise, route_groups, split_rows
+from hollowtree.tiling.grid import TileGrid, morton_order
+from hollowtree.tiling.kernels import morton_index_order, quantise, route_groups, split_rows
 
 
 def _points(rng: np.random.Generator, grid: TileGrid, n: int) -> np.ndarray:
@@ -99,7 +99,7 @@ def test_morton_index_order_matches_index_then_morton(dup):
 
 
 def test_radix_sorts_agree_and_are_stable():
-    from tiling.kernels import _radix_packed, _radix_pairs
+    from hollowtree.tiling.kernels import _radix_packed, _radix_pairs
 
     rng = np.random.default_rng(5)
     code = rng.integers(0, 2**20, 50_000).astype(np.uint64)

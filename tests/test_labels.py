@@ -6,17 +6,17 @@ import laspy
 import numpy as np
 import pytest
 
-from pipeline.labels import LABEL_DTYPES, LEAF_BITS
-from pipeline.run import run_workflow
-from pipeline.workflow import load_workflow
-from tiling.classes import ClassId
-from tiling.grid import TileGrid
-from tiling.store import RunStore
+from hollowtree.pipeline.labels import LABEL_DTYPES, LEAF_BITS
+from hollowtree.pipeline.run import run_workflow
+from hollowtree.pipeline.workflow import load_workflow
+from hollowtree.tiling.classes import ClassId
+from hollowtree.tiling.grid import TileGrid
+from hollowtree.tiling.store import RunStore
 
 
 @pytest.fixture(scope="module")
 def scan(tmp_path_factory):
-    from scenes.synth import synth
+    from hollowtree.scenes.synth import synth
 
     path = tmp_path_factory.mktemp("lab") / "wk.laz"
     synth("wazir_khan", path, n_points=80_000, seed=5)
@@ -31,12 +31,12 @@ SHALLOW = "{enabled: true, max_depth: 1}"
 def shallow_run(tmp_path_factory, scan):
     """The plain run with the SHALLOW tree, once for the tests that compare with it (read
     only): its folder, (store, labels) and how many times it replaced the workers."""
-    import pipeline.graph
+    import hollowtree.pipeline.graph as graph
 
     calls: list[int] = []
     path = tmp_path_factory.mktemp("shallow")
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(pipeline.graph, "fresh_workers", lambda runner: calls.append(1))
+        mp.setattr(graph, "fresh_workers", lambda runner: calls.append(1))
         result = _run(path, scan, tree=SHALLOW)
     return path, result, len(calls)
 
@@ -147,7 +147,7 @@ def test_large_groups_are_built_on_a_sample(tmp_path, scan, shallow):
 def test_labels_in_small_parts_are_the_same(tmp_path, scan, plain, monkeypatch, voxel):
     """A tile's labels written PART_ROWS points at a time (the stage's memory bound) are
     the labels of one part per tile, with and without voxel-dropped points."""
-    import pipeline.labels as labels
+    import hollowtree.pipeline.labels as labels
 
     ingest = "{tile_size: 50.0}" if voxel is None else f"{{tile_size: 50.0, voxel: {voxel}}}"
     _, whole = plain if voxel is None else _run(tmp_path / "whole", scan, ingest=ingest)
@@ -162,7 +162,7 @@ def test_labels_in_small_parts_are_the_same(tmp_path, scan, plain, monkeypatch, 
         np.testing.assert_array_equal(small[k], whole[k], err_msg=k)
     assert (small["segment"] > 0).mean() > 0.3
     if voxel is None:  # the export's figure finds every core point's class in its part
-        from pipeline.export import _sample
+        from hollowtree.pipeline.export import _sample
 
         _, cls = _sample(small_store, n_max=10**9)
         np.testing.assert_array_equal(np.bincount(cls, minlength=9), np.bincount(small["class"], minlength=9))
@@ -175,8 +175,8 @@ def test_instances_merged_across_groups_reach_labels_and_nodes(tmp_path, scan, s
     instance wherever there was one; the classes are untouched."""
     import pyarrow.parquet as pq
 
-    import tree.merge as tm
-    from pipeline.tree_stage import MERGE_MAP
+    import hollowtree.tree.merge as tm
+    from hollowtree.pipeline.tree_stage import MERGE_MAP
 
     plain_store, plain = shallow
     imap = plain_store.read_slice(MERGE_MAP)
@@ -201,8 +201,8 @@ def test_classes_after_the_merge_reach_labels_and_nodes(tmp_path, scan, shallow,
     nodes of tree/nodes.parquet hold; points in no instance keep the tree's class."""
     import pyarrow.parquet as pq
 
-    import tree.merge as tm
-    from pipeline.tree_stage import MERGE_CLASS_MAP
+    import hollowtree.tree.merge as tm
+    from hollowtree.pipeline.tree_stage import MERGE_CLASS_MAP
 
     plain_store, plain = shallow
     assert plain_store.has(MERGE_CLASS_MAP)
@@ -228,8 +228,8 @@ def test_arcade_cells_reach_labels(tmp_path, scan, shallow, monkeypatch):
     """The tree stage's arcade cells (tree/rows.py) are what the labels stage applies:
     inside a `take` cell the wall, other, pillar and dome points join its bay (class arch),
     every other point keeps its labels; the cells are kept in tree/rows/cells."""
-    import tree.rows as tr
-    from pipeline.tree_stage import ROWS
+    import hollowtree.tree.rows as tr
+    from hollowtree.pipeline.tree_stage import ROWS
 
     plain_store, plain = shallow
     assert plain_store.has(ROWS)
@@ -254,9 +254,9 @@ def test_arcade_cells_reach_labels(tmp_path, scan, shallow, monkeypatch):
 def test_frame_joins_reach_labels(tmp_path, scan, shallow, monkeypatch):
     """A face that tree/frames.py joins to a passage is that instance in the labels, with
     class arch, wall faces included; the frames' cells follow the rows' in tree/rows/cells."""
-    import tree.frames as tf
-    import tree.rows as tr
-    from pipeline.tree_stage import ROWS
+    import hollowtree.tree.frames as tf
+    import hollowtree.tree.rows as tr
+    from hollowtree.pipeline.tree_stage import ROWS
 
     _, plain = shallow
     chosen: dict[str, int] = {}
@@ -286,13 +286,13 @@ def test_workers_are_replaced_after_each_stage_that_ran_tasks(tmp_path, scan, sh
     records (a rerun with another tree parameter replaces them after the tree only)."""
     import shutil
 
-    import pipeline.graph
+    import hollowtree.pipeline.graph as graph
 
     folder, _, n_fresh = shallow_run
     assert n_fresh == 3  # the SHALLOW run from an empty store
     shutil.copytree(folder / "s.zarr", tmp_path / "s.zarr")  # the shared store stays as it is
     calls: list[int] = []
-    monkeypatch.setattr(pipeline.graph, "fresh_workers", lambda runner: calls.append(1))
+    monkeypatch.setattr(graph, "fresh_workers", lambda runner: calls.append(1))
     _run(tmp_path, scan, tree="{enabled: true, max_depth: 2}")
     assert len(calls) == 1
     calls.clear()
@@ -313,8 +313,8 @@ def test_representatives_are_found_in_any_part_two_parts_held(tmp_path, monkeypa
     """The dropped points' lookup (labels._KeptParts) finds a representative in whichever
     part holds it, also behind the last part that answered, holds at most two parts, and
     names the tile when one is missing."""
-    from pipeline.labels import _KeptParts
-    from tiling.errors import PipelineError
+    from hollowtree.pipeline.labels import _KeptParts
+    from hollowtree.tiling.errors import PipelineError
 
     rng = np.random.default_rng(0)
     index = rng.permutation(10_000).astype(np.uint64)
@@ -348,7 +348,7 @@ def test_labels_task_reads_each_kept_part_about_once(tmp_path, scan, monkeypatch
     the order the ingest wrote them: part loads stay near one per kept part and dropped
     part, not their product (memory: two kept parts and one dropped part at a time). This
     holds while a part is no shorter than an ingest batch (labels.PART_ROWS >= ingest.FLUSH_ROWS)."""
-    import pipeline.labels as labels
+    import hollowtree.pipeline.labels as labels
 
     loads: list[int] = []
     original = labels._KeptParts._part
@@ -358,7 +358,7 @@ def test_labels_task_reads_each_kept_part_about_once(tmp_path, scan, monkeypatch
             loads.append(j)
         return original(self, j)
 
-    import tiling.ingest as ingest
+    import hollowtree.tiling.ingest as ingest
 
     monkeypatch.setattr(labels, "PART_ROWS", 1_500)
     monkeypatch.setattr(ingest, "FLUSH_ROWS", 1_500)  # the ingest's batches, as in a large tile
@@ -381,13 +381,13 @@ def test_tree_device_auto_on_a_cpu_machine_gives_the_cpu_labels(tmp_path, scan, 
 
     import torch
 
-    import pipeline.tree_stage
-    from tiling.errors import ConfigError
+    import hollowtree.pipeline.tree_stage as tree_stage
+    from hollowtree.tiling.errors import ConfigError
 
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
     seen: list[str] = []
-    get = pipeline.tree_stage._device
-    monkeypatch.setattr(pipeline.tree_stage, "_device", lambda d: seen.append(get(d)) or seen[-1])
+    get = tree_stage._device
+    monkeypatch.setattr(tree_stage, "_device", lambda d: seen.append(get(d)) or seen[-1])
     _, want = shallow
     _, got = _run(tmp_path / "a", scan, tree=SHALLOW[:-1] + ", device: auto}")
     assert seen
@@ -404,24 +404,58 @@ def test_tree_device_auto_on_a_cpu_machine_gives_the_cpu_labels(tmp_path, scan, 
 
 
 def test_an_existing_client_runs_the_workflow_and_stays_open(tmp_path, scan, shallow):
-    """``run_workflow(wf, client=...)``: a notebook's Client (here of a LocalCluster of
-    threads) runs the tasks instead of the workflow's cluster, with the same labels, and
-    is still usable afterwards."""
+    """``hollowtree.run(path, client=...)`` from a notebook: its Client (here of a
+    LocalCluster of threads) runs the tasks instead of the workflow's cluster, with the same
+    labels, and is still usable afterwards; the result opens as arrays."""
     from distributed import Client, LocalCluster
+
+    import hollowtree
 
     wf_path = tmp_path / "wf.yaml"
     wf_path.write_text(f"input: {{files: [{scan}]}}\nstore: {tmp_path / 's.zarr'}\ningest: {{tile_size: 50.0}}\n"
                        f"coarse: {{min_support: 300}}\ntree: {SHALLOW}\ncluster: {{scheduler: sync}}\n")
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=":0") as cluster, \
             Client(cluster) as client:
-        run_workflow(load_workflow(wf_path), progress=False, say=lambda _: None, client=client)
+        result = hollowtree.run(wf_path, client=client)
         assert client.submit(sum, [1, 2]).result() == 3
         prefixes = set(client.run_on_scheduler(lambda dask_scheduler: list(dask_scheduler.task_prefixes)))
     assert {"map_chunk", "tree_batch", "labels_range"} <= prefixes  # its workers ran the stages
-    store = RunStore.open(tmp_path / "s.zarr")
     _, want = shallow
+    np.testing.assert_array_equal(result.class_id, want["class"])
+    np.testing.assert_array_equal(result.instance, want["instance"])
+    store = RunStore.open(tmp_path / "s.zarr")
     for k in LABEL_DTYPES:
         np.testing.assert_array_equal(store.read_slice(f"labels/{k}"), want[k], err_msg=k)
+
+
+def test_open_reads_labels_points_and_tables(shallow_run, scan):
+    """``hollowtree.open(store)``: labels in input order, the points' world coordinates,
+    an Arrow table of both, the segment and node tables; a store without labels or no
+    store at all is one clear error."""
+    import hollowtree
+    from hollowtree.tiling.errors import PipelineError
+
+    folder, (_, want), _ = shallow_run
+    res = hollowtree.open(folder / "s.zarr")
+    assert len(res) == len(want["class"])
+    assert "points" in repr(res)
+    np.testing.assert_array_equal(res.segment, want["segment"])
+    assert sum(res.counts().values()) == len(res)
+    assert set(res.counts()) <= set(res.class_name)
+    index, xyz = res.points()
+    src = laspy.read(scan)
+    np.testing.assert_array_equal(index, np.arange(len(src)))
+    np.testing.assert_allclose(xyz, np.c_[src.x, src.y, src.z], atol=1e-6)
+    table = res.to_arrow()
+    assert table.num_rows == len(src)
+    assert table.column_names[:4] == ["index", "x", "y", "z"]
+    np.testing.assert_array_equal(table["instance"].to_numpy(), want["instance"])
+    names = table["class_name"].to_pylist()
+    assert names[:50] == list(res.class_name[:50])
+    assert res.segments().num_rows > 0
+    assert res.nodes().num_rows > 0
+    with pytest.raises(PipelineError, match="does not exist|not a hollowtree store|no store"):
+        hollowtree.open(folder / "nothing.zarr")
 
 
 def test_export_keeps_the_users_data(tmp_path, scan):
@@ -431,7 +465,7 @@ def test_export_keeps_the_users_data(tmp_path, scan):
     import laspy
     from laspy.vlrs.known import ClassificationLookupVlr
 
-    from pipeline.export import INPUT_CLASSIFICATION, LAS_CLASSIFICATION
+    from hollowtree.pipeline.export import INPUT_CLASSIFICATION, LAS_CLASSIFICATION
 
     las = laspy.read(scan)
     las.header.global_encoding.gps_time_type = laspy.header.GpsTimeType.STANDARD

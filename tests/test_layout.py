@@ -5,8 +5,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-import tree
-from tiling import classes
+import hollowtree.tree
+from hollowtree.tiling import classes
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGES = ["pipeline", "tiling", "tree", "hollownet", "primitives", "scenes"]
@@ -18,13 +18,19 @@ EDGE_MODULES = {"pipeline/cli.py", "pipeline/export.py", "pipeline/fuzz.py", "pi
 FORBIDDEN_IN_KERNELS = {"dask", "zarr", "laspy", "yaml"}
 
 
+def _top(name: str) -> str:
+    """The package an import names: ``hollowtree.tree.build`` -> ``tree``; ``numpy.linalg`` -> ``numpy``."""
+    parts = name.split(".")
+    return parts[1] if parts[0] == "hollowtree" and len(parts) > 1 else parts[0]
+
+
 def _imports(path: Path) -> set[str]:
     mods: set[str] = set()
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.Import):
-            mods |= {a.name.split(".")[0] for a in node.names}
+            mods |= {_top(a.name) for a in node.names}
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            mods.add(node.module.split(".")[0])
+            mods.add(_top(node.module))
     return mods
 
 
@@ -35,13 +41,26 @@ def _modules():
 
 
 def test_top_level_layout():
-    for name in ["pyproject.toml", "README.md", "pipeline", "tiling", "tree", "hollownet",
+    for name in ["pyproject.toml", "README.md", "hollowtree", "pipeline", "tiling", "tree", "hollownet",
                  "tests", "workflows", "docs", "benchmarks", ".ci/run"]:
         assert (REPO / name).exists(), name
 
 
 def test_tree_is_ours_not_dm_tree():
-    assert Path(tree.__file__).resolve().is_relative_to(REPO)
+    assert Path(hollowtree.tree.__file__).resolve().is_relative_to(REPO)
+
+
+def test_one_import_name():
+    """Every module imports its siblings through ``hollowtree``, never as a top-level
+    package (an installed wheel has no top-level ``tree``, ``pipeline``, ...)."""
+    for rel, path in [*_modules(), *((p.relative_to(REPO).as_posix(), p) for p in
+                                     sorted((REPO / "tests").glob("*.py")))]:
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                     [node.module] if isinstance(node, ast.ImportFrom) and node.module and node.level == 0
+                     else [])
+            for name in names:
+                assert name.split(".")[0] not in PACKAGES, f"{rel}:{node.lineno} imports {name}"
 
 
 def test_kernels_stay_pure():

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from primitives.normals import NormalResult, estimate_normals
-from tiling.errors import ConfigError
+from hollowtree.primitives.normals import NormalResult, estimate_normals
+from hollowtree.tiling.errors import ConfigError
 
 
 def _plane(n: int, normal: np.ndarray, noise: float, rng: np.random.Generator) -> np.ndarray:
@@ -185,7 +185,7 @@ def test_closed_form_eigen_matches_lapack() -> None:
     """The closed-form 3 x 3 eigensolver of the PCA against np.linalg.eigh: random
     planar-ish and general neighbourhoods, and the degenerate cases (zero matrix, isotropic,
     rank one) that it hands to LAPACK."""
-    from primitives.normals import _sym3_eigen
+    from hollowtree.primitives.normals import _sym3_eigen
 
     rng = np.random.default_rng(7)
     m = 4000

@@ -10,10 +10,17 @@ import laspy
 import numpy as np
 import pytest
 
-from scenes.procedural import FAMILIES, SPLITS, family_of, procedural_site, scan_draw, split_seeds
-from scenes.sites import GENERATED, build_scene
-from tiling.classes import ClassId
-from tiling.errors import ConfigError
+from hollowtree.scenes.procedural import (
+    FAMILIES,
+    SPLITS,
+    family_of,
+    procedural_site,
+    scan_draw,
+    split_seeds,
+)
+from hollowtree.scenes.sites import GENERATED, build_scene
+from hollowtree.tiling.classes import ClassId
+from hollowtree.tiling.errors import ConfigError
 
 
 @pytest.mark.parametrize("family", FAMILIES)
@@ -93,7 +100,7 @@ def test_generated_names_build_through_the_registry():
 
 def test_synth_writes_a_procedural_site_with_its_own_counts(tmp_path):
     out = tmp_path / "g.laz"
-    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "synth", "gen-pavilion_garden", "--seed", "200003",
+    proc = subprocess.run([sys.executable, "-m", "hollowtree", "synth", "gen-pavilion_garden", "--seed", "200003",
                            "--points", "40000", "--out", str(out), "--no-progress"], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     las = laspy.read(out)

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from primitives.ransac import RansacParams, RansacResult, efficient_ransac
-from primitives.shapes import (
+from hollowtree.primitives.ransac import RansacParams, RansacResult, efficient_ransac
+from hollowtree.primitives.shapes import (
     DEFAULT_KINDS,
     KINDS,
     FailedFit,
@@ -18,7 +18,7 @@ from primitives.shapes import (
     fit_primitive,
     surface_coordinates,
 )
-from tiling.errors import ConfigError
+from hollowtree.tiling.errors import ConfigError
 
 PARAMS = RansacParams().to_dict()
 
@@ -387,9 +387,9 @@ def test_fast_compatibility_matches_distances(kind):
 
 # ------------------------------------------------------------------ a scanned scene
 def test_scanned_minaret_scene():
-    from scenes.scanner import ScanParams, scan
-    from scenes.sites import build_scene
-    from tiling.classes import ClassId
+    from hollowtree.scenes.scanner import ScanParams, scan
+    from hollowtree.scenes.sites import build_scene
+    from hollowtree.tiling.classes import ClassId
 
     chunks = list(scan(build_scene("minaret"), ScanParams(step_deg=0.3, n_stations=2, seed=1)))
     xyz = np.concatenate([c.xyz for c in chunks])

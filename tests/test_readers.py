@@ -11,14 +11,14 @@ import numpy as np
 import plyfile
 import pytest
 
-from tiling.errors import (
+from hollowtree.tiling.errors import (
     ConfigError,
     CorruptInputError,
     InputFileError,
     PipelineError,
     UnsupportedInputError,
 )
-from tiling.readers import PointBlock, SourceInfo, probe, read_blocks
+from hollowtree.tiling.readers import PointBlock, SourceInfo, probe, read_blocks
 
 EXTERNAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "external"
 N = 2_500
@@ -358,7 +358,7 @@ def test_e57_probe(e57_file):
 def test_e57_nonfinite_after_reading_is_dropped():
     """pye57 cannot write NaN into a valid record, so feed one to the block builder."""
     pytest.importorskip("pye57", reason="pye57 is not installed")
-    from tiling import readers
+    from hollowtree.tiling import readers
 
     scan = readers._Scan(header=None, count=3, coords=("cartesianX", "cartesianY", "cartesianZ"),
                          invalid=None, intensity=None, rgb_top=None, pose=None)
@@ -596,7 +596,7 @@ def _las_with_empty_wkt(path: Path) -> Path:
 
 @pytest.mark.parametrize("source", ["made", "warsaw"])
 def test_an_empty_crs_vlr_is_no_crs_in_ingest_and_export(tmp_path, source, caplog):
-    from pipeline.export import _out_header
+    from hollowtree.pipeline.export import _out_header
 
     path = _las_with_empty_wkt(tmp_path / "empty-wkt.las") if source == "made" else external("pdal/warsaw_small.las")
     info = probe(path)
@@ -618,7 +618,7 @@ def test_autzen_in_feet_runs_in_metres_and_is_called_sparse(tmp_path):
     wf = tmp_path / "wf.yaml"
     wf.write_text(f"input: {{files: [{path}]}}\nstore: {tmp_path / 's.zarr'}\ntree: {{enabled: false}}\n"
                   "cluster: {scheduler: sync}\n")
-    r = subprocess.run([sys.executable, "-m", "pipeline.cli", "run", str(wf), "--no-progress"],
+    r = subprocess.run([sys.executable, "-m", "hollowtree", "run", str(wf), "--no-progress"],
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert "input coordinates in foot (0.3048 m, from the CRS)" in r.stdout

@@ -17,12 +17,12 @@ import laspy
 import numpy as np
 import pytest
 
-from pipeline.coarse import COARSE_ALGORITHM
-from pipeline.export import LAS_CLASSIFICATION
-from pipeline.labels import LABEL_DTYPES
-from tiling.classes import ClassId
-from tiling.lock import StoreLock
-from tiling.store import RunStore
+from hollowtree.pipeline.coarse import COARSE_ALGORITHM
+from hollowtree.pipeline.export import LAS_CLASSIFICATION
+from hollowtree.pipeline.labels import LABEL_DTYPES
+from hollowtree.tiling.classes import ClassId
+from hollowtree.tiling.lock import StoreLock
+from hollowtree.tiling.store import RunStore
 
 pytestmark = [pytest.mark.slow, pytest.mark.cluster]
 REPO = Path(__file__).resolve().parents[1]
@@ -30,7 +30,7 @@ POINTS = 150_000
 
 
 def _cli(*args: str, env: dict[str, str] | None = None, cwd: Path | None = None, **kw) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pipeline.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "hollowtree", *args], capture_output=True, text=True,
                           env=env, cwd=cwd, **kw)
 
 
@@ -59,7 +59,7 @@ def _same(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> None:
 
 @pytest.fixture(scope="module")
 def scan(tmp_path_factory):
-    from scenes.synth import synth
+    from hollowtree.scenes.synth import synth
 
     path = tmp_path_factory.mktemp("scan") / "wk.laz"
     synth("wazir_khan", path, n_points=POINTS, seed=3)
@@ -184,7 +184,7 @@ def _wait_for_records(store: Path, stage: str, n: int, proc: subprocess.Popen, t
 def test_sigkill_mid_run_then_resume(reference, scan, tmp_path):
     store = tmp_path / "k.zarr"
     wf = _workflow(tmp_path, scan, str(store))
-    proc = subprocess.Popen([sys.executable, "-m", "pipeline.cli", "run", str(wf), "--no-progress"],
+    proc = subprocess.Popen([sys.executable, "-m", "hollowtree", "run", str(wf), "--no-progress"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         _wait_for_records(store, "coarse", 2, proc)
@@ -238,7 +238,7 @@ def test_cli_started_dask_cluster_matches_local_when_a_worker_dies(reference, sc
     address, procs = dask_cluster
     store = tmp_path / "c.zarr"
     wf = REPO / "workflows" / "cluster.yaml"
-    run = subprocess.Popen([sys.executable, "-m", "pipeline.cli", "run", str(wf), "--no-progress", "--scheduler",
+    run = subprocess.Popen([sys.executable, "-m", "hollowtree", "run", str(wf), "--no-progress", "--scheduler",
                             address, "--set", f"input.files=[{scan}]", "--set", f"store={store}",
                             "--set", "ingest.tile_size=50.0", "--set", "ingest.voxel=null",
                             "--set", "coarse.min_support=300", "--set", "tree.batch_points=40000",
@@ -313,7 +313,7 @@ def _alive(pid: int) -> bool:
 def test_fresh_workers_replaces_only_our_own_worker_processes():
     """After the tree stage the run replaces its local cluster's workers (torch and
     HollowNet stay in a worker otherwise); the in-process runner has none to replace."""
-    from pipeline.graph import fresh_workers, task_runner
+    from hollowtree.pipeline.graph import fresh_workers, task_runner
 
     with task_runner("sync", progress=False) as run:
         fresh_workers(run)
@@ -358,7 +358,7 @@ def _hold_memory(mb: int) -> float:
 
 
 def _fail(message: str) -> None:
-    from tiling.errors import ConfigError
+    from hollowtree.tiling.errors import ConfigError
 
     raise ConfigError(message)
 
@@ -372,8 +372,8 @@ def test_in_child_runs_each_task_in_a_child_of_its_worker_and_frees_its_memory()
     the worker): the worker gets the child's memory back, the child's result or exception
     comes back, and a child killed by a signal is a PipelineError that says so. Outside a
     worker process (the sync runner) the task runs in place."""
-    from pipeline.graph import in_child, task_runner
-    from tiling.errors import ConfigError, PipelineError
+    from hollowtree.pipeline.graph import in_child, task_runner
+    from hollowtree.tiling.errors import ConfigError, PipelineError
 
     with task_runner("sync", progress=False) as run:
         assert run(in_child(_pids), [()], "pids") == [_pids()]
@@ -404,8 +404,8 @@ def test_in_child_task_over_the_worker_memory_limit_is_stopped():
 
     from distributed import Client, LocalCluster
 
-    from pipeline.graph import in_child
-    from tiling.errors import PipelineError
+    from hollowtree.pipeline.graph import in_child
+    from hollowtree.tiling.errors import PipelineError
 
     with LocalCluster(n_workers=1, threads_per_worker=1, memory_limit="700MB", dashboard_address=":0",
                       silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
@@ -421,7 +421,7 @@ def test_in_child_task_over_the_worker_memory_limit_is_stopped():
 def test_progress_bars_only_on_a_terminal(capsys):
     """Output that is no terminal (a log file, a pipe) gets no progress bar, only the
     stage lines; a bar's carriage returns would fill it."""
-    from pipeline.graph import task_runner
+    from hollowtree.pipeline.graph import task_runner
 
     with task_runner("sync", progress=True) as run:
         assert run(abs, [(-1,), (-2,)], "a stage") == [1, 2]
@@ -432,12 +432,12 @@ def test_verbose_turns_on_our_own_loggers_only(tmp_path):
     """``-v``: hollowtree's modules log at DEBUG, other libraries stay at WARNING."""
     import logging
 
-    from pipeline.cli import OWN_LOGGERS, main
+    from hollowtree.pipeline.cli import OWN_LOGGERS, main
 
     before = {n: logging.getLogger(n).level for n in (*OWN_LOGGERS, "fsspec")}
     try:
         assert main(["-v", "status", str(tmp_path / "none.zarr")]) == 2
-        assert logging.getLogger("tiling.store").getEffectiveLevel() == logging.DEBUG
+        assert logging.getLogger("hollowtree.tiling.store").getEffectiveLevel() == logging.DEBUG
         assert logging.getLogger("fsspec").getEffectiveLevel() > logging.DEBUG
         assert logging.getLogger().level > logging.DEBUG
     finally:

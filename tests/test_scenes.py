@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from embreex import mesh_construction, rtcore_scene
 
-from scenes.elements import arcade, minaret, portal
-from scenes.mesh import TriMesh
-from scenes.shapes import (
+from hollowtree.scenes.elements import arcade, minaret, portal
+from hollowtree.scenes.mesh import TriMesh
+from hollowtree.scenes.shapes import (
     ArcPath,
     StraightPath,
     arch_outline,
@@ -19,8 +19,15 @@ from scenes.shapes import (
     triangulate_polygon,
     wall_panel,
 )
-from scenes.sites import GENERATED, SITES, TEST_SCENES, UnknownSceneError, build_scene, scene_names
-from tiling.classes import ELEMENT_CLASSES, ClassId
+from hollowtree.scenes.sites import (
+    GENERATED,
+    SITES,
+    TEST_SCENES,
+    UnknownSceneError,
+    build_scene,
+    scene_names,
+)
+from hollowtree.tiling.classes import ELEMENT_CLASSES, ClassId
 
 # Table 1 of the paper: arches, domes, minarets.
 TABLE1 = {
@@ -284,7 +291,7 @@ def test_roman_site_openings_pass(sites):
 
 
 def _merge(meshes):
-    from scenes.mesh import concat_meshes
+    from hollowtree.scenes.mesh import concat_meshes
 
     m = concat_meshes(list(meshes))
     return m.vertices, m.faces

@@ -5,14 +5,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from primitives.score import (
+from hollowtree.primitives.score import (
     FUSED_KINDS,
     compatible_counts,
     compatible_mask,
     point_columns,
     shared_hits,
 )
-from primitives.shapes import candidates_from_minimal_sets, compatible, distance_and_cosine
+from hollowtree.primitives.shapes import (
+    candidates_from_minimal_sets,
+    compatible,
+    distance_and_cosine,
+)
 
 EPS, COS_A = 0.05, 0.9
 
@@ -109,7 +113,7 @@ def test_kernel_reads_columns_without_gathers():
     10x slower (docs/benchmarks.md). Compiled afresh, since cached code has no assembly."""
     import numba
 
-    from primitives import score
+    from hollowtree.primitives import score
 
     fresh = numba.njit(nogil=True)(score._kernel.py_func)
     xyz, nrm, params = _scene(0, "plane")

@@ -7,16 +7,16 @@ import json
 import numpy as np
 import pytest
 
-from tree.build import _per_point, build_tree
-from tree.energy import load_energy_model
-from tree.fit_split import (
+from hollowtree.tree.build import _per_point, build_tree
+from hollowtree.tree.energy import load_energy_model
+from hollowtree.tree.fit_split import (
     SplitSamples,
     _node_decisions,
     fit_split_model,
     proposal_samples,
     proposal_target,
 )
-from tree.split import (
+from hollowtree.tree.split import (
     DEFAULT_SPLIT_PATH,
     FEATURE_NAMES,
     SplitModel,
@@ -202,7 +202,7 @@ def test_fit_split_cli_refuses_bad_arguments_before_any_work(tmp_path):
     for args, words in ((["--out", str(out)], "exists"),
                         (["--out", str(tmp_path / "no" / "m.json")], "does not exist"),
                         (["--out", str(tmp_path / "n.json"), "--threshold", "1.5"], "--threshold")):
-        proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "fit-split", "--work", str(work), *args,
+        proc = subprocess.run([sys.executable, "-m", "hollowtree", "fit-split", "--work", str(work), *args,
                                "--no-progress"], capture_output=True, text=True, timeout=120)
         assert proc.returncode == 2, proc.stderr
         assert words in proc.stderr
@@ -220,8 +220,8 @@ def test_energy_decision_is_still_the_papers(tmp_path):
 
 
 def test_storeyed_arcades_are_seeded_storeys_of_arch_bays():
-    from hollownet._scenes import storeyed_arcades
-    from tiling.classes import ClassId
+    from hollowtree.hollownet._scenes import storeyed_arcades
+    from hollowtree.tiling.classes import ClassId
 
     a = storeyed_arcades(np.random.default_rng([7, 100]))
     b = storeyed_arcades(np.random.default_rng([7, 100]))

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tiling.store import CHUNK_POINTS, FRAGMENT_BLOCK_ROWS, RunStore, StoreError
+from hollowtree.tiling.store import CHUNK_POINTS, FRAGMENT_BLOCK_ROWS, RunStore, StoreError
 
 
 @pytest.fixture

@@ -10,10 +10,10 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from pipeline.cli import main
-from scenes.sites import SITES
-from scenes.synth import SCALE, read_scan_metadata, sidecar_path
-from tiling.classes import ELEMENT_CLASSES, ClassId
+from hollowtree.pipeline.cli import main
+from hollowtree.scenes.sites import SITES
+from hollowtree.scenes.synth import SCALE, read_scan_metadata, sidecar_path
+from hollowtree.tiling.classes import ELEMENT_CLASSES, ClassId
 
 
 def test_version(capsys):
@@ -23,7 +23,7 @@ def test_version(capsys):
 
 def test_console_script_runs():
     out = subprocess.run(
-        [sys.executable, "-m", "pipeline.cli", "--version"], capture_output=True, text=True
+        [sys.executable, "-m", "hollowtree", "--version"], capture_output=True, text=True
     )
     assert out.returncode == 0
     assert "hollowtree" in out.stdout

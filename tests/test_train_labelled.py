@@ -12,14 +12,14 @@ import laspy
 import numpy as np
 import pytest
 
-from hollownet.dataset import labelled_samples
-from tiling.errors import ConfigError
+from hollowtree.hollownet.dataset import labelled_samples
+from hollowtree.tiling.errors import ConfigError
 
 pytestmark = pytest.mark.slow
 
 
 def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pipeline.cli", *args], capture_output=True, text=True, cwd=cwd)
+    return subprocess.run([sys.executable, "-m", "hollowtree", *args], capture_output=True, text=True, cwd=cwd)
 
 
 @pytest.fixture(scope="module")
@@ -142,7 +142,7 @@ def test_no_synthetic_needs_a_labelled_scan(tmp_path):
 
 
 def test_the_split_model_fits_on_training_seeds_only(tmp_path):
-    from pipeline.split_fit import procedural_groups
+    from hollowtree.pipeline.split_fit import procedural_groups
 
     with pytest.raises(ConfigError, match="procedural seed 200000 is not a training seed"):
         procedural_groups(200_000, tmp_path)
@@ -151,9 +151,9 @@ def test_the_split_model_fits_on_training_seeds_only(tmp_path):
 def test_procedural_samples_are_the_ones_train_from_takes_of_the_same_scan(tmp_path):
     """``train --procedural N`` cuts the samples ``--from`` cuts from the same procedural
     scan (cached once), and takes training seeds only."""
-    from pipeline.hollownet_cmd import procedural_samples, read_labelled
-    from scenes.procedural import scan_draw
-    from scenes.synth import synth
+    from hollowtree.pipeline.hollownet_cmd import procedural_samples, read_labelled
+    from hollowtree.scenes.procedural import scan_draw
+    from hollowtree.scenes.synth import synth
 
     with pytest.raises(ConfigError, match="procedural seed 100000 is not a training seed"):
         procedural_samples(100_000, 50_000, tmp_path, seed=0, variants=1)

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from scenes.scanner import ScanParams, scan
-from scenes.sites import build_scene
-from tiling.classes import NUM_CLASSES, ClassId
-from tree import build_tree, load_energy_model
-from tree.fit import minaret_stage_cuts, proposal_target
+from hollowtree.scenes.scanner import ScanParams, scan
+from hollowtree.scenes.sites import build_scene
+from hollowtree.tiling.classes import NUM_CLASSES, ClassId
+from hollowtree.tree import build_tree, load_energy_model
+from hollowtree.tree.fit import minaret_stage_cuts, proposal_target
 
 STEP = 0.2  # degrees: about 80 000 points on the minaret
 
@@ -192,8 +192,8 @@ def test_energy_model_file_is_versioned_and_complete():
 def test_a_kept_storeys_split_makes_its_bands_wall_children(monkeypatch):
     """A storeys proposal is judged by its children at the bands' middles and, kept, makes
     the children of its band ends; the band child is wall whatever the classifier says."""
-    import tree.build as tb
-    from tree.sequences import Proposal
+    import hollowtree.tree.build as tb
+    from hollowtree.tree.sequences import Proposal
 
     rng = np.random.default_rng(0)
     xyz = np.c_[rng.uniform(0, 20, 3000), np.zeros(3000), rng.uniform(0, 9, 3000)]
@@ -235,7 +235,7 @@ def test_gaps_cut_parts_that_do_not_touch():
     """Two bastions 19 m apart (a 7 m gap) joined by a few points of a curtain wall are cut
     at the gap; one bastion, a gap under ``params.gap``, or stray points too few to be a
     part are not."""
-    from tree.sequences import GAP_SEQUENCE, SequenceParams, gaps
+    from hollowtree.tree.sequences import GAP_SEQUENCE, SequenceParams, gaps
 
     rng = np.random.default_rng(0)
     a, b = _bastion(rng, (0.0, 0.0)), _bastion(rng, (0.0, 19.0))
@@ -280,8 +280,8 @@ class _ArchWholeMinaretParts:
 def test_the_tree_splits_the_root_at_its_gaps_first(monkeypatch):
     """Only the root: inside the tree a gap is more often the opening between two piers
     whose arch another cut took away."""
-    import tree.build as tb
-    from tree.sequences import GAP_SEQUENCE
+    import hollowtree.tree.build as tb
+    from hollowtree.tree.sequences import GAP_SEQUENCE
 
     calls = []
 
@@ -348,7 +348,7 @@ def test_parts_apart_are_found_in_any_direction():
     """The chattri 0.3 m off the shaft is a part (the gap cut along the wall does not see
     it: they overlap along every axis but x, by height); pieces under 5 % of the node go
     with the nearest part; nothing apart, or ``part_gap`` 0, gives None."""
-    from tree.sequences import PART_SEQUENCE, SequenceParams, gaps, parts
+    from hollowtree.tree.sequences import PART_SEQUENCE, SequenceParams, gaps, parts
 
     rng = np.random.default_rng(0)
     shaft, chattri = _shaft_and_chattri(rng)
@@ -371,7 +371,7 @@ def test_a_root_nothing_splits_is_cut_into_parts_of_different_classes():
     and the whole no dome, minaret or other: a shaft and a chattri (minaret, dome) called
     arch together are two instances; called minaret both, or arch and pillar, a chattri
     1.5 m tall, or the whole called dome, the root stays whole."""
-    from tree.sequences import PART_SEQUENCE
+    from hollowtree.tree.sequences import PART_SEQUENCE
 
     rng = np.random.default_rng(1)
     shaft, chattri = _shaft_and_chattri(rng)
@@ -416,7 +416,7 @@ class _ByProposal:
     threshold = 0.5
 
     def __init__(self):
-        from tree.split import FEATURE_NAMES
+        from hollowtree.tree.split import FEATURE_NAMES
 
         self._s2 = FEATURE_NAMES.index("seq_s2")
         self.calls = 0
@@ -430,8 +430,8 @@ def test_a_storeys_split_is_kept_when_a_storey_splits(monkeypatch):
     """A wall's (or a minaret's) storey cut leaves two walls (the split model rejects it, as the S1 cut that
     ties with it), but the storey below splits into bays: the storey cut is judged by that
     look-ahead, not by its own score."""
-    import tree.build as tb
-    from tree.sequences import Proposal
+    import hollowtree.tree.build as tb
+    from hollowtree.tree.sequences import Proposal
 
     rng = np.random.default_rng(0)
     xyz = np.c_[rng.uniform(0, 12, 20000), np.zeros(20000), rng.uniform(0, 10, 20000)]
@@ -482,10 +482,10 @@ def test_a_storeys_split_is_kept_when_a_storey_splits(monkeypatch):
 def test_the_tree_stage_passes_look_ahead_from_the_workflow(monkeypatch):
     from pathlib import Path
 
-    import tree.build as tb
-    from pipeline.tree_stage import TreeStageParams, _group_tree
-    from pipeline.workflow import load_workflow
-    from tiling.errors import ConfigError
+    import hollowtree.tree.build as tb
+    from hollowtree.pipeline.tree_stage import TreeStageParams, _group_tree
+    from hollowtree.pipeline.workflow import load_workflow
+    from hollowtree.tiling.errors import ConfigError
 
     local = Path(__file__).resolve().parent.parent / "workflows" / "local.yaml"
     assert TreeStageParams.from_workflow(load_workflow(local).tree).look_ahead is True
@@ -549,7 +549,7 @@ class _SlenderPillarElseDome:
 def test_posts_are_found_under_their_slab(floor):
     """Each post under the slab (on a platform or not) is one post, holding its own
     points; a slab, a ring of posts that touch and a solid block have none."""
-    from tree.sequences import SequenceParams, posts
+    from hollowtree.tree.sequences import SequenceParams, posts
 
     xyz, part = _posts_under_a_slab(np.random.default_rng(0), floor=floor)
     found = posts(xyz)
@@ -572,7 +572,7 @@ def test_posts_are_found_under_their_slab(floor):
 def test_posts_are_found_above_a_slice_of_more_pieces():
     """Thirty tufts of grass around the platform make its slice the one with the most
     pieces; the posts still come from the slice that gives the most posts."""
-    from tree.sequences import posts
+    from hollowtree.tree.sequences import posts
 
     rng = np.random.default_rng(4)
     xyz, part = _posts_under_a_slab(rng)
@@ -587,7 +587,7 @@ def test_posts_are_found_above_a_slice_of_more_pieces():
 def test_the_shafts_of_a_clustered_pillar_are_one_post():
     """Four shafts (0.5 m across, 0.14 m apart: touching at the posts' cells), two such
     pillars 3 m apart under a beam: two posts, each holding its four shafts."""
-    from tree.sequences import posts
+    from hollowtree.tree.sequences import posts
 
     rng = np.random.default_rng(3)
     pieces = []
@@ -606,7 +606,7 @@ def test_a_root_called_dome_gives_up_the_posts_called_pillar():
     """The posts of a frame HollowNet calls dome are pillar instances, the slab and the
     cap one more child; posts called something else, or a root called wall or arch
     (an arcade's piers) or other (a scaffold's poles), stay whole."""
-    from tree.sequences import POST_SEQUENCE
+    from hollowtree.tree.sequences import POST_SEQUENCE
 
     xyz, part = _posts_under_a_slab(np.random.default_rng(2))
     r = build_tree(xyz, _SlenderPillarElseDome(), rng=0, split=_Never())
@@ -621,7 +621,7 @@ def test_a_root_called_dome_gives_up_the_posts_called_pillar():
         assert (r.class_id[r.instance == own[-1]] == int(ClassId.PILLAR)).all()
     assert len(set(own)) == 4
     # The rest falls apart once its posts are out: the platform is no part of the slab and cap.
-    from tree.sequences import PART_SEQUENCE
+    from hollowtree.tree.sequences import PART_SEQUENCE
 
     rest = kids[-1]
     assert r.nodes.sequence[r.nodes.children(rest)].tolist() == [PART_SEQUENCE] * 2

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tree.frames import frame_cells
+from hollowtree.tree.frames import frame_cells
 
 #: A facade wall 1.5 m thick along x (y from 0 to 1.5), scanned from y < 0.
 THICK = 1.5

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tiling.classes import ClassId
-from tree.merge import merge_instances
+from hollowtree.tiling.classes import ClassId
+from hollowtree.tree.merge import merge_instances
 
 A, D = int(ClassId.ARCH), int(ClassId.DOME)
 
@@ -52,7 +52,7 @@ def test_chains_take_the_smallest_id_and_ids_out_of_range_fail():
 
 def test_many_instances_are_compared_in_blocks(monkeypatch):
     """The pairs are compared _PAIR_BLOCK at a time: the same map as all at once."""
-    import tree.merge as tm
+    import hollowtree.tree.merge as tm
 
     rng = np.random.default_rng(0)
     lo = rng.uniform(0, 60, (300, 3))
@@ -96,7 +96,7 @@ def test_an_arch_stacked_with_a_minaret_is_part_of_it():
     4.5 x 4.5 m) is one minaret and takes its class. An arcade's end bay beside the
     minaret (a quarter of its footprint), an arch of the minaret's own group, an arch
     1 m below, and (``into=()``) the rule off: apart."""
-    from tree.merge import merged_classes
+    from hollowtree.tree.merge import merged_classes
 
     M = int(ClassId.MINARET)
     lower, upper = [32.8, 16.8, 0.0, 37.3, 26.5, 10.8], [33.0, 17.0, 11.0, 39.0, 23.0, 31.6]

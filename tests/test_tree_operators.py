@@ -7,9 +7,21 @@ import math
 import numpy as np
 import pytest
 
-from tree.energy import e1, e2, e3, e4, e5, energy_terms
-from tree.operators import TransportCurve, fit_circle, h, p, plateaus, psi, rho, split_at, u, v1, v2
-from tree.sequences import SequenceParams, s1, s2, s3, storeys
+from hollowtree.tree.energy import e1, e2, e3, e4, e5, energy_terms
+from hollowtree.tree.operators import (
+    TransportCurve,
+    fit_circle,
+    h,
+    p,
+    plateaus,
+    psi,
+    rho,
+    split_at,
+    u,
+    v1,
+    v2,
+)
+from hollowtree.tree.sequences import SequenceParams, s1, s2, s3, storeys
 
 
 def _ring(rng, *, center=(0.0, 0.0), radius=1.0, n=500, noise=0.0, arc=(0.0, 2 * math.pi)):

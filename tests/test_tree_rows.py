@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tiling.classes import ClassId
-from tree.rows import ArcadeCells, apply_cells, arcade_cells, instance_sample
+from hollowtree.tiling.classes import ClassId
+from hollowtree.tree.rows import ArcadeCells, apply_cells, arcade_cells, instance_sample
 
 PITCH = 3.6
 ARCH, WALL = int(ClassId.ARCH), int(ClassId.WALL)

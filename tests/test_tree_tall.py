@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.tree_stage import TreeStageParams
-from tiling.classes import ClassId
-from tiling.errors import ConfigError
-from tree.build import build_tree
-from tree.tall import TallPillars, tall_pillars
+from hollowtree.pipeline.tree_stage import TreeStageParams
+from hollowtree.tiling.classes import ClassId
+from hollowtree.tiling.errors import ConfigError
+from hollowtree.tree.build import build_tree
+from hollowtree.tree.tall import TallPillars, tall_pillars
 
 P, M, W = int(ClassId.PILLAR), int(ClassId.MINARET), int(ClassId.WALL)
 
@@ -85,8 +85,8 @@ def test_tree_params_validate_the_bound():
 def test_short_minarets_are_pillars_per_instance_in_the_tree_stage():
     """A dome's finial (2 m) that HollowNet calls minaret is a pillar; a 25 m shaft stays a
     minaret. The rule works on whole instances, and the node table holds the result."""
-    from pipeline.tree_stage import _group_tree
-    from tree.tall import short_minarets
+    from hollowtree.pipeline.tree_stage import _group_tree
+    from hollowtree.tree.tall import short_minarets
 
     assert short_minarets([M, M, P], [2.0, 25.0, 2.0], 10.0).tolist() == [P, M, P]
     with pytest.raises(ValueError, match="height"):
@@ -110,8 +110,8 @@ def test_slender_domes_are_minarets_per_instance_in_the_tree_stage():
     """A 23 m stretch of a minaret (4 m across) that HollowNet calls dome is a minaret; a
     dome on its drum (6 m across, 7 m high) and a chattri (2 m across, 3.8 m high) stay
     domes; the rule is off with the size rules."""
-    from pipeline.tree_stage import _group_tree
-    from tree.tall import slender_domes
+    from hollowtree.pipeline.tree_stage import _group_tree
+    from hollowtree.tree.tall import slender_domes
 
     dome = int(ClassId.DOME)
     assert slender_domes([dome, dome, dome, M], [23.0, 7.0, 3.8, 30.0], [4.0, 6.0, 2.0, 4.0],
@@ -146,7 +146,7 @@ class _Clutter:
 
 
 def test_not_clutter_moves_raised_or_tall_other_to_its_next_class():
-    from tree.tall import not_clutter
+    from hollowtree.tree.tall import not_clutter
 
     prob = np.zeros((5, 8))
     prob[:, OT - 1], prob[:, D - 1] = 0.7, 0.3
@@ -168,7 +168,7 @@ def test_not_clutter_wrapper_measures_each_part_from_the_ground():
     """A bush on the ground stays other; the same shape on a roof (a dome on its drum), a
     27 m part (a bastion seen from one side) and a 20 m long one do not. Scores stay
     HollowNet's."""
-    from tree.tall import NotClutter
+    from hollowtree.tree.tall import NotClutter
 
     rng = np.random.default_rng(4)
     bush = rng.uniform(0, 1, (400, 3)) * [3.0, 3.0, 2.5]
@@ -192,7 +192,7 @@ def test_not_clutter_wrapper_measures_each_part_from_the_ground():
 
 
 def test_size_rules_compose_and_turn_off():
-    from tree.tall import NotClutter, size_rules
+    from hollowtree.tree.tall import NotClutter, size_rules
 
     base = _Clutter()
     assert size_rules(base, pillar_max_height=None, other_max_base=None, other_max_size=None) is base
@@ -204,7 +204,7 @@ def test_size_rules_compose_and_turn_off():
 def test_the_tree_stage_reads_the_clutter_rule_from_its_params():
     """A raised 'bush' (a dome on a roof, 11 m above the ground) is a dome instance in the
     tree stage when the ground is known, and stays other with the rule off."""
-    from pipeline.tree_stage import _group_tree
+    from hollowtree.pipeline.tree_stage import _group_tree
 
     rng = np.random.default_rng(5)
     xyz = rng.uniform(0, 1, (3000, 3)) * [4.0, 4.0, 3.0] + [0, 0, 11.0]

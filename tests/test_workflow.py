@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.run import changed_stages
-from pipeline.workflow import Workflow, WorkflowError, load_workflow, schema_text
+from hollowtree.pipeline.run import changed_stages
+from hollowtree.pipeline.workflow import Workflow, WorkflowError, load_workflow, schema_text
 
 REPO = Path(__file__).resolve().parents[1]
 WORKFLOWS = sorted((REPO / "workflows").glob("*.yaml"))
@@ -89,7 +89,7 @@ def test_overrides_apply(tmp_path):
 def test_cli_bad_workflow_exits_2_and_writes_nothing(tmp_path):
     store = tmp_path / "s.zarr"
     path = _write(tmp_path, GOOD.replace("STORE", str(store)).replace("epsilon: 0.03", "epsilon: 0"))
-    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "run", str(path)],
+    proc = subprocess.run([sys.executable, "-m", "hollowtree", "run", str(path)],
                           capture_output=True, text=True, cwd=tmp_path)
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
@@ -127,7 +127,7 @@ def test_tree_decision_is_checked(tmp_path):
 
 
 def test_init_writes_the_shipped_workflows_and_keeps_a_users_files(tmp_path, capsys):
-    from pipeline.cli import main
+    from hollowtree.pipeline.cli import main
 
     target = tmp_path / "mine"
     assert main(["init", str(target)]) == 0
@@ -144,16 +144,32 @@ def test_init_writes_the_shipped_workflows_and_keeps_a_users_files(tmp_path, cap
     assert (target / "local.yaml").read_text() == (REPO / "workflows" / "local.yaml").read_text()
 
 
-def test_the_wheel_ships_the_workflows_under_the_package(tmp_path):
-    """A normal install has the example workflows (``hollowtree init``, ``evaluate``'s
-    default) as ``pipeline/workflows``, not as a top-level package of their own."""
+def test_an_install_is_one_package_named_hollowtree(tmp_path):
+    """``pip install --no-deps --target DIR .`` puts only ``hollowtree`` and its dist-info in
+    DIR (the console script aside): the subpackages and the example workflows
+    (``hollowtree init``, ``evaluate``'s default) live under it, and they import from there."""
+    import os
     import subprocess
     import sys
-    import zipfile
 
-    r = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w",
-                        str(tmp_path), str(REPO)], capture_output=True, text=True)
+    target = tmp_path / "site"
+    r = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "--no-build-isolation", "-q",
+                        "--target", str(target), str(REPO)], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
-    names = zipfile.ZipFile(next(tmp_path.glob("hollowtree-*.whl"))).namelist()
-    assert {f"pipeline/workflows/{n}" for n in ("local.yaml", "laptop.yaml", "cluster.yaml", "schema.json")} <= set(names)
-    assert not any(n.startswith("workflows/") for n in names)
+    top = {p.name for p in target.iterdir()} - {"bin"}
+    assert top == {"hollowtree", next(n for n in top if n.endswith(".dist-info"))}, top
+    pkg = target / "hollowtree"
+    assert {"pipeline", "tiling", "tree", "hollownet", "primitives", "scenes", "workflows"} <= {
+        p.name for p in pkg.iterdir() if p.is_dir()}
+    assert {f.name for f in (pkg / "workflows").iterdir()} >= {"local.yaml", "laptop.yaml", "cluster.yaml",
+                                                                "schema.json"}
+    assert (pkg / "hollownet" / "weights" / "hollownet-v1.pt").is_file()
+    code = ("import hollowtree, hollowtree.tree.build as b; from hollowtree.pipeline.workflow import "
+            "shipped_workflows; print(b.__file__); print(shipped_workflows()); print(hollowtree.open.__module__)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path,
+                         env={**os.environ, "PYTHONPATH": str(target)})
+    assert out.returncode == 0, out.stderr
+    built, flows, api = out.stdout.split()
+    assert Path(built).is_relative_to(pkg)
+    assert Path(flows) == pkg / "workflows"
+    assert api == "hollowtree.api"

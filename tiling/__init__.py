@@ -4,7 +4,7 @@ The run store, readers and ingest (issue 3) are not built yet; this package hold
 what every other floor imports.
 """
 
-from tiling.classes import (
+from hollowtree.tiling.classes import (
     CLASS_NAMES,
     ELEMENT_CLASSES,
     NUM_CLASSES,
@@ -12,7 +12,7 @@ from tiling.classes import (
     ClassId,
     class_id,
 )
-from tiling.errors import ConfigError, InputFileError, OutputExistsError, PipelineError
+from hollowtree.tiling.errors import ConfigError, InputFileError, OutputExistsError, PipelineError
 
 __all__ = [
     "CLASS_NAMES",

@@ -41,7 +41,7 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from tiling.errors import ConfigError
+from hollowtree.tiling.errors import ConfigError
 
 __all__ = ["TileGrid", "morton_order"]
 
@@ -89,7 +89,7 @@ class TileGrid:
     >>> TileGrid(origin=(0.0, 0.0), tile_size=-3, buffer=0.0, shape=(1, 1))
     Traceback (most recent call last):
     ...
-    tiling.errors.ConfigError: The 'tile_size' parameter of TileGrid must be > 0; got -3.
+    hollowtree.tiling.errors.ConfigError: The 'tile_size' parameter of TileGrid must be > 0; got -3.
     """
 
     origin: tuple[float, float]

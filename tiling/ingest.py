@@ -30,12 +30,19 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from tiling.columns import column_max, column_min
-from tiling.errors import ConfigError, CorruptInputError
-from tiling.grid import TileGrid
-from tiling.kernels import morton_index_order, quantise, route_groups, split_rows
-from tiling.readers import UNIT_METRES, PointBlock, SourceInfo, crs_units, probe, read_blocks
-from tiling.store import RunStore, StoreError, check_writable
+from hollowtree.tiling.columns import column_max, column_min
+from hollowtree.tiling.errors import ConfigError, CorruptInputError
+from hollowtree.tiling.grid import TileGrid
+from hollowtree.tiling.kernels import morton_index_order, quantise, route_groups, split_rows
+from hollowtree.tiling.readers import (
+    UNIT_METRES,
+    PointBlock,
+    SourceInfo,
+    crs_units,
+    probe,
+    read_blocks,
+)
+from hollowtree.tiling.store import RunStore, StoreError, check_writable
 
 __all__ = [
     "IngestParams",

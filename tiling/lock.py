@@ -27,7 +27,7 @@ from typing import Any
 import fsspec
 from fsspec.implementations.local import LocalFileSystem
 
-from tiling.errors import PipelineError
+from hollowtree.tiling.errors import PipelineError
 
 __all__ = ["StoreBusyError", "StoreLock", "HEARTBEAT_S", "STALE_S"]
 

@@ -47,7 +47,7 @@ import numpy as np
 import numpy.typing as npt
 import plyfile
 
-from tiling.errors import (
+from hollowtree.tiling.errors import (
     ConfigError,
     CorruptInputError,
     InputFileError,

@@ -12,8 +12,8 @@
 The per-segment Dask tasks and the CLI live in ``pipeline/``.
 """
 
-from tree.build import NodeTable, TreeResult, build_tree
-from tree.energy import (
+from hollowtree.tree.build import NodeTable, TreeResult, build_tree
+from hollowtree.tree.energy import (
     Classifier,
     EnergyModel,
     e1,
@@ -24,9 +24,20 @@ from tree.energy import (
     energy_terms,
     load_energy_model,
 )
-from tree.operators import TransportCurve, fit_circle, fit_ngon, h, p, psi, rho, u, v1, v2
-from tree.sequences import Proposal, SequenceParams, propose, s1, s2, s3, storeys
-from tree.split import SplitModel, load_split_model, split_features
+from hollowtree.tree.operators import (
+    TransportCurve,
+    fit_circle,
+    fit_ngon,
+    h,
+    p,
+    psi,
+    rho,
+    u,
+    v1,
+    v2,
+)
+from hollowtree.tree.sequences import Proposal, SequenceParams, propose, s1, s2, s3, storeys
+from hollowtree.tree.split import SplitModel, load_split_model, split_features
 
 __all__ = [
     "Classifier",

@@ -24,11 +24,11 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
-from tiling.classes import ELEMENT_CLASSES, ClassId
-from tiling.columns import column_max, column_min, column_span
-from tree.energy import Classifier, EnergyModel, energy_terms, load_energy_model
-from tree.operators import RngLike, h
-from tree.sequences import (
+from hollowtree.tiling.classes import ELEMENT_CLASSES, ClassId
+from hollowtree.tiling.columns import column_max, column_min, column_span
+from hollowtree.tree.energy import Classifier, EnergyModel, energy_terms, load_energy_model
+from hollowtree.tree.operators import RngLike, h
+from hollowtree.tree.sequences import (
     GAP_SEQUENCE,
     PART_SEQUENCE,
     POST_SEQUENCE,
@@ -39,7 +39,7 @@ from tree.sequences import (
     posts,
     propose,
 )
-from tree.split import N_PROBS, SplitModel, split_features
+from hollowtree.tree.split import N_PROBS, SplitModel, split_features
 
 __all__ = ["NodeTable", "TreeResult", "build_tree"]
 

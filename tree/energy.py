@@ -26,7 +26,7 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
-from tiling.classes import NUM_CLASSES
+from hollowtree.tiling.classes import NUM_CLASSES
 
 __all__ = [
     "DEFAULT_MODEL_PATH",

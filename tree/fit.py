@@ -35,11 +35,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from scenes.scanner import ScanParams, scan
-from scenes.sites import build_scene
-from tiling.classes import NUM_CLASSES, ClassId
-from tree.energy import Classifier, EnergyModel, energy_terms
-from tree.sequences import SequenceParams, propose
+from hollowtree.scenes.scanner import ScanParams, scan
+from hollowtree.scenes.sites import build_scene
+from hollowtree.tiling.classes import NUM_CLASSES, ClassId
+from hollowtree.tree.energy import Classifier, EnergyModel, energy_terms
+from hollowtree.tree.sequences import SequenceParams, propose
 
 __all__ = [
     "GOOD_TARGET",

@@ -30,11 +30,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from tiling.columns import column_span
-from tree.build import _is_flat
-from tree.energy import Classifier
-from tree.sequences import SequenceParams, propose
-from tree.split import FEATURE_NAMES, SplitModel, split_features
+from hollowtree.tiling.columns import column_span
+from hollowtree.tree.build import _is_flat
+from hollowtree.tree.energy import Classifier
+from hollowtree.tree.sequences import SequenceParams, propose
+from hollowtree.tree.split import FEATURE_NAMES, SplitModel, split_features
 
 __all__ = ["GOOD_TARGET", "THRESHOLDS", "SplitSamples", "fit_split_model", "proposal_samples", "proposal_target"]
 

@@ -31,8 +31,8 @@ import numpy.typing as npt
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from primitives.dbscan import dbscan_labels
-from tree.operators import (
+from hollowtree.primitives.dbscan import dbscan_labels
+from hollowtree.tree.operators import (
     Histogram,
     RngLike,
     TransportCurve,
