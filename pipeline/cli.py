@@ -349,7 +349,8 @@ def build_parser() -> argparse.ArgumentParser:
     e = sub.add_parser(
         "export", help="write labelled points (LAS/LAZ), tables (Parquet) or views (PNG) of a run",
         description="Export the labels of a finished run: every input point in input order with "
-                    "class_id, instance_id, segment_id, score, primitive_id and the LAS classification.",
+                    "class_id, instance_id, segment_id, score, primitive_id and the LAS classification; "
+                    "beside the LAS/LAZ, class styles for QGIS (.qml) and CloudCompare (.cc-classes.xml).",
     )
     e.add_argument("store", help="run store")
     e.add_argument("--las", type=Path, help="output .las or .laz")
@@ -561,7 +562,7 @@ def _wave_line(w: Any) -> str:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from hollowtree.pipeline.export import export_las, export_parquet, export_png
+    from hollowtree.pipeline.export import export_las, export_parquet, export_png, style_paths
     from hollowtree.tiling.errors import ConfigError
     from hollowtree.tiling.store import RunStore
 
@@ -571,6 +572,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
     if args.las:
         n = export_las(store, args.las, progress=not args.no_progress)
         print(f"{args.las}: {n:,} points")
+        qml, cc = style_paths(args.las)
+        print(f"{qml}: QGIS style\n{cc}: CloudCompare colour scale")
     if args.parquet:
         for path in export_parquet(store, args.parquet):
             print(path)

@@ -11,18 +11,23 @@
   ``input_classification``) its classification are kept; a classification lookup VLR
   names the codes. Records of PLY/E57 inputs with non-finite coordinates
   were dropped at ingest and are not exported (the ingest reported their count).
+  Beside the file, with the same stem, it writes the class styles: ``<stem>.qml`` (a
+  QGIS point cloud style) and ``<stem>.cc-classes.xml`` (a CloudCompare colour scale)
+  that colour and name the codes of :data:`LAS_LEGEND`.
 * :func:`export_parquet` copies the segment and tree tables.
 * :func:`export_png` draws a top and a side view of a sample of the labelled points,
   coloured by class, like the paper's result figures.
 
-All three write to a temporary name and rename at the end, so an interrupted export
-never leaves a half file under the requested name.
+All of them write each file to a temporary name and rename it at the end, so an
+interrupted export never leaves a half file under the requested name.
 """
 
 from __future__ import annotations
 
 import os
 import shutil
+import uuid
+import xml.etree.ElementTree as ET
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -36,12 +41,15 @@ from hollowtree.tiling.errors import ConfigError, PipelineError
 from hollowtree.tiling.readers import las_crs, read_blocks
 from hollowtree.tiling.store import RunStore
 
-__all__ = ["INPUT_CLASSIFICATION", "LAS_CLASSIFICATION", "CLASS_COLOURS", "export_las", "export_parquet", "export_png", "write_outputs"]
+__all__ = ["INPUT_CLASSIFICATION", "LAS_CLASSIFICATION", "LAS_LEGEND", "CLASS_COLOURS", "cloudcompare_scale",
+           "export_las", "export_parquet", "export_png", "qgis_style", "style_paths", "write_outputs"]
 
-#: LAS classification written for each hollowtree class: ASPRS codes where one exists
-#: (1 unclassified, 2 ground, 6 building), user-definable codes 64-67 for the elements.
+#: LAS classification written for each hollowtree class: the ASPRS code where the class is
+#: one (1 unclassified, 2 ground); every building part has a code of its own in the
+#: user-definable range 64-255 (arch 64, dome 65, minaret 66, pillar 67, wall 68, roof 69),
+#: so ASPRS 6 (building) is not used. ``other`` (clutter) is 1 like unclassified.
 LAS_CLASSIFICATION: dict[ClassId, int] = {
-    ClassId.UNCLASSIFIED: 1, ClassId.GROUND: 2, ClassId.WALL: 6, ClassId.ROOF: 6,
+    ClassId.UNCLASSIFIED: 1, ClassId.GROUND: 2, ClassId.WALL: 68, ClassId.ROOF: 69,
     ClassId.ARCH: 64, ClassId.DOME: 65, ClassId.MINARET: 66, ClassId.PILLAR: 67, ClassId.OTHER: 1,
 }
 #: RGB (0-1) of each class in the PNG views, indexed by class id.
@@ -50,10 +58,25 @@ CLASS_COLOURS = np.array([
     (0.95, 0.55, 0.05), (0.15, 0.65, 0.25), (0.60, 0.25, 0.75), (0.35, 0.35, 0.35),
 ])
 assert len(CLASS_COLOURS) == NUM_CLASSES
+
+
+def _legend() -> tuple[tuple[int, str, tuple[int, int, int]], ...]:
+    named: dict[int, ClassId] = {}
+    for c in sorted(LAS_CLASSIFICATION):  # a shared code is named by its lowest class id
+        named.setdefault(LAS_CLASSIFICATION[c], c)
+    return tuple((code, CLASS_NAMES[c], tuple(int(round(255 * v)) for v in CLASS_COLOURS[c]))
+                 for code, c in sorted(named.items()))
+
+
+#: ``(LAS code, name, (r, g, b) 0-255)`` of every code written, by code: the names of the
+#: classification lookup VLR and the categories of the QGIS and CloudCompare styles.
+LAS_LEGEND: tuple[tuple[int, str, tuple[int, int, int]], ...] = _legend()
 _EXTRA = (("class_id", np.uint8, "class"), ("instance_id", np.uint32, "instance"),
           ("segment_id", np.uint64, "segment"), ("score", np.float32, "score"),
           ("primitive_id", np.uint8, "primitive"))
 _UPGRADE = {0: 6, 1: 6, 2: 7, 3: 7, 4: 9, 5: 10}
+#: Degrees per unit of the scan angle of point formats 6+ (formats 0-5: whole degrees).
+SCAN_ANGLE_STEP = 0.006
 #: The extra dimension that keeps a LAS input's own classification (``classification``
 #: holds the labels).
 INPUT_CLASSIFICATION = "input_classification"
@@ -104,17 +127,19 @@ def _out_header(sources: list[dict[str, Any]]) -> laspy.LasHeader:
             raise ConfigError(f"input {sources[0]['path']} already has a dimension {name!r}; cannot export labels")
         header.add_extra_dim(laspy.ExtraBytesParams(name=name, type=dt))
     lookup = ClassificationLookupVlr()  # names the codes for viewers that read LAS 1.4's lookup
-    for c, code in LAS_CLASSIFICATION.items():
-        lookup.lookups[code] = {1: "unclassified", 2: "ground", 6: "building"}.get(code, CLASS_NAMES[c])
+    for code, name, _ in LAS_LEGEND:
+        lookup.lookups[code] = name
     header.vlrs.append(lookup)
     return header
 
 
 def _remade(vlr: Any) -> bool:
-    """A VLR the exported file gets anew: the CRS, the extra-bytes description, the
-    classification lookup."""
+    """A VLR the exported file gets anew (the CRS, the extra-bytes description, the
+    classification lookup, LAZ's own) or must not carry: COPC's info and hierarchy
+    describe the input's octree layout, which the exported file does not have."""
     uid, rid = getattr(vlr, "user_id", ""), getattr(vlr, "record_id", -1)
-    return uid == "LASF_Projection" or (uid == "LASF_Spec" and rid in (0, 4)) or uid == "laszip encoded"
+    return (uid in ("LASF_Projection", "laszip encoded", "copc")
+            or (uid == "LASF_Spec" and rid in (0, 4)))
 
 
 def _labels(store: RunStore, index: np.ndarray) -> dict[str, np.ndarray]:
@@ -159,6 +184,10 @@ def export_las(store: RunStore, out: str | Path, *, progress: bool = False) -> i
                                 rec.array[name] = chunk.array[name]
                             elif name in names and name not in ("X", "Y", "Z", "classification"):
                                 rec[name] = chunk[name]
+                        if "scan_angle_rank" in names and "scan_angle" in header.point_format.dimension_names:
+                            # formats 0-5 (whole degrees) upgraded to 6+ (0.006 degree steps)
+                            rec["scan_angle"] = np.round(np.asarray(chunk.scan_angle_rank, np.float64)
+                                                         / SCAN_ANGLE_STEP).astype(np.int16)
                         if INPUT_CLASSIFICATION in header.point_format.dimension_names and "classification" in names:
                             rec[INPUT_CLASSIFICATION] = np.asarray(chunk.classification, dtype=np.uint8)
                         index = np.arange(base + start, base + start + len(chunk), dtype=np.int64)
@@ -181,7 +210,79 @@ def export_las(store: RunStore, out: str | Path, *, progress: bool = False) -> i
                     bar.update(len(block.xyz) + block.n_dropped)
             base += int(s["point_count"])
     os.replace(tmp, out)
+    _write_styles(out)
     return n_out
+
+
+#: The QGIS version the style says it was written for: point cloud layers and their
+#: classified renderer exist since 3.18; an older number would make QGIS run its
+#: upgrades of old project files on the style.
+_QGIS_STYLE_VERSION = "3.28.0"
+#: The scale's UUID: the same for every export, so CloudCompare knows it when it is
+#: imported again.
+_CC_SCALE_UUID = "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, "hollowtree:las-classes")) + "}"
+
+
+def style_paths(out: str | Path) -> tuple[Path, Path]:
+    """The class styles :func:`export_las` writes beside ``out``: the QGIS style
+    ``<stem>.qml`` and the CloudCompare colour scale ``<stem>.cc-classes.xml``."""
+    out = Path(out)
+    return out.with_name(f"{out.stem}.qml"), out.with_name(f"{out.stem}.cc-classes.xml")
+
+
+def _write_styles(out: Path) -> None:
+    qml, cc = style_paths(out)
+    for path, data in ((qml, qgis_style()), (cc, cloudcompare_scale())):
+        tmp = _tmp(path)
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+
+
+def qgis_style() -> bytes:
+    """A QGIS style (.qml) for the exported point cloud layer: the point cloud renderer
+    ``classified`` on the attribute ``Classification``, one category per code of
+    :data:`LAS_LEGEND` (its name and colour). The tags are those QGIS's
+    ``QgsPointCloudClassifiedRenderer`` reads (``<renderer type="classified">``,
+    ``<categories>``, ``<category value label color render>``, colours ``r,g,b,a``)."""
+    root = ET.Element("qgis", {"version": _QGIS_STYLE_VERSION, "styleCategories": "Symbology"})
+    renderer = ET.SubElement(root, "renderer", {
+        "type": "classified", "attribute": "Classification", "pointSize": "2", "pointSizeUnit": "MM",
+        "maximumScreenError": "0.3", "maximumScreenErrorUnit": "MM"})
+    cats = ET.SubElement(renderer, "categories")
+    for code, name, (r, g, b) in LAS_LEGEND:
+        ET.SubElement(cats, "category", {"value": str(code), "label": name,
+                                         "color": f"{r},{g},{b},255", "render": "true"})
+    ET.SubElement(root, "blendMode").text = "0"
+    ET.indent(root)
+    doctype = "<!DOCTYPE qgis PUBLIC 'http://mrcc.com/qgis.dtd' 'SYSTEM'>\n"
+    return doctype.encode() + ET.tostring(root, encoding="utf-8") + b"\n"
+
+
+def cloudcompare_scale() -> bytes:
+    """A CloudCompare colour scale (the Color Scale Editor's XML) for the LAS
+    classification: absolute, from 0 to the highest code + 1, flat at each code's colour
+    (+-0.45 around the code) and one label per code naming it. The tags are those of
+    ``ccColorScale::saveAsXML`` / ``LoadFromXML`` (``<CloudCompare><ColorScale version="1">``,
+    ``<Properties>`` name, uuid, absolute, minValue, range; ``<Data>`` with
+    ``<step r g b pos>`` from pos 0 to 1 and ``<label val text>``)."""
+    top = float(LAS_LEGEND[-1][0] + 1)
+    steps: list[tuple[float, tuple[int, int, int]]] = [(0.0, LAS_LEGEND[0][2])]
+    for code, _, rgb in LAS_LEGEND:
+        steps += [((code - 0.45) / top, rgb), ((code + 0.45) / top, rgb)]
+    steps.append((1.0, LAS_LEGEND[-1][2]))
+    root = ET.Element("CloudCompare")
+    scale = ET.SubElement(root, "ColorScale", {"version": "1"})  # CloudCompare wants it first
+    props = ET.SubElement(scale, "Properties")
+    for tag, text in (("name", "hollowtree classes"), ("uuid", _CC_SCALE_UUID), ("absolute", "1"),
+                      ("minValue", "0"), ("range", f"{top:.12g}")):
+        ET.SubElement(props, tag).text = text
+    data = ET.SubElement(scale, "Data")
+    for pos, (r, g, b) in steps:
+        ET.SubElement(data, "step", {"r": str(r), "g": str(g), "b": str(b), "pos": f"{pos:.12g}"})
+    for code, name, _ in LAS_LEGEND:
+        ET.SubElement(data, "label", {"val": str(code), "text": name})
+    ET.indent(root)
+    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="utf-8") + b"\n"
 
 
 def _fill(rec: Any, store: RunStore, index: np.ndarray, mapping: np.ndarray) -> None:
@@ -297,6 +398,8 @@ def write_outputs(store: RunStore, wf: Any, *, progress: bool = False) -> Iterat
     if o.las:
         n = export_las(store, o.las, progress=progress)
         yield f"outputs: {o.las} ({n:,} points with class_id, instance_id, segment_id, score, primitive_id)"
+        qml, cc = style_paths(o.las)
+        yield f"outputs: {qml} (QGIS style), {cc} (CloudCompare colour scale)"
     if o.parquet:
         paths = export_parquet(store, o.parquet)
         yield f"outputs: {', '.join(str(p) for p in paths)}"
