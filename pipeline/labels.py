@@ -25,6 +25,10 @@ Arrays written (``docs/store.md``), each of length = the number of input points:
 
 Points outside the ingested tiles (a run limited by ``bbox`` or ``tiles``) and points in
 no coarse segment keep 0 everywhere.
+
+A sparse scan (points more than ``MAX_SPACING`` apart: an airborne scan) takes its ground
+from the terrain filter (``primitives/terrain.py``, SMRF) run on each whole tile: those
+points are class ground, instance 0, whatever the tree said.
 """
 
 from __future__ import annotations
@@ -38,9 +42,11 @@ from typing import Any
 
 import numpy as np
 
+from hollowtree.pipeline.coarse import MAX_SPACING
 from hollowtree.pipeline.graph import in_child
 from hollowtree.pipeline.tree_stage import MERGE_CLASS_MAP, MERGE_MAP, ROWS
-from hollowtree.tiling.classes import NUM_CLASSES
+from hollowtree.primitives.terrain import smrf_ground
+from hollowtree.tiling.classes import NUM_CLASSES, ClassId
 from hollowtree.tiling.errors import PipelineError
 from hollowtree.tiling.grid import TileGrid
 from hollowtree.tiling.store import CHUNK_POINTS, RunStore
@@ -122,9 +128,10 @@ def _arcade_cells(store: RunStore, tile: int) -> ArcadeCells:
     return ArcadeCells(cells.frame[keep], cells.box[keep], cells.instance[keep], cells.take[keep], cells.trim[keep])
 
 
-def _core_labels(store: RunStore, tile: int, start: int, stop: int, cfg: dict[str, Any]
-                 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """Original index and labels of the core points among tile rows ``[start, stop)``."""
+def _core_labels(store: RunStore, tile: int, start: int, stop: int, cfg: dict[str, Any],
+                 ground: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Original index and labels of the core points among tile rows ``[start, stop)``;
+    ``ground``: the tile's rows that the terrain filter calls ground (sparse scans)."""
     pts = {k: store.read_slice(f"tiles/{tile}/{k}", start, stop) for k in ("index", "core")}
     coarse = {k: store.read_slice(f"coarse/tiles/{tile}/{k}", start, stop) for k in ("primitive", "global", "csr_pos")}
     core = np.flatnonzero(pts["core"])
@@ -145,6 +152,10 @@ def _core_labels(store: RunStore, tile: int, start: int, stop: int, cfg: dict[st
         leaf[has] = tv["leaf"]
         for k in ("class", "instance", "score"):
             values[k][has] = tv[k]
+    if ground is not None:  # a sparse scan: its ground is the terrain filter's
+        on = ground[start:stop][core]
+        values["class"][on] = ClassId.GROUND
+        values["instance"][on] = 0
     values["segment"] = np.where(glob > 0, (glob << np.uint64(LEAF_BITS)) | leaf, 0).astype(np.uint64)
     return pts["index"][core], {k: v.astype(LABEL_DTYPES[k]) for k, v in values.items()}
 
@@ -233,9 +244,13 @@ def labels_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, Any]:
         store.delete(f"labels/parts/{tile}")
     n_rows = store.array_length(f"tiles/{tile}/index")
     n_dropped = store.array_length(f"tiles/{tile}/voxel_dropped") if store.has(f"tiles/{tile}/voxel_dropped") else 0
+    ground = None
+    if cfg.get("terrain"):  # the whole tile, buffer included: the filter's windows reach past the core
+        scale = np.asarray(store.attrs["coords"]["scale"], dtype=np.float64)
+        ground = smrf_ground(store.read_slice(f"tiles/{tile}/xyz").astype(np.float64) * scale)
     parts = []
     for start in range(0, max(n_rows, 1), PART_ROWS):
-        index, values = _core_labels(store, tile, start, min(start + PART_ROWS, n_rows), cfg)
+        index, values = _core_labels(store, tile, start, min(start + PART_ROWS, n_rows), cfg, ground)
         _, info = _write_part(store, tile, len(parts), index, values, cfg["n_points"])
         parts.append(info)
     kept = _KeptParts(store, tile, len(parts))
@@ -302,7 +317,14 @@ def labels_hash(attrs: dict[str, Any], *, use_tree: bool) -> str:
     upstream = stages.get("tree" if use_tree else "coarse", {}).get("params_hash")
     if upstream is None:
         raise PipelineError(f"the {'tree' if use_tree else 'coarse'} stage has not run on this store")
-    return hashlib.sha256(json.dumps(["labels-v2", upstream, use_tree]).encode()).hexdigest()[:16]
+    return hashlib.sha256(json.dumps(["labels-v3", upstream, use_tree, terrain(attrs)]).encode()).hexdigest()[:16]
+
+
+def terrain(attrs: dict[str, Any]) -> bool:
+    """Whether the scan's ground comes from the terrain filter (``primitives/terrain.py``):
+    its points are more than ``MAX_SPACING`` apart, as the coarse stage measured."""
+    spacing = attrs.get("stages", {}).get("coarse", {}).get("spacing")
+    return spacing is not None and float(spacing) > MAX_SPACING
 
 
 def run_labels(url: str, *, use_tree: bool, runner: Any) -> LabelsReport:
@@ -317,7 +339,8 @@ def run_labels(url: str, *, use_tree: bool, runner: Any) -> LabelsReport:
     if stages.get(STAGE, {}).get("params_hash") not in (None, h):
         store.clear_records(TILE_STAGE)
         store.clear_records(STAGE)
-    cfg = {"params_hash": h, "n_points": n_points, "tree": stages.get("tree") if use_tree else None}
+    cfg = {"params_hash": h, "n_points": n_points, "tree": stages.get("tree") if use_tree else None,
+           "terrain": terrain(attrs)}
     done_t = {k: v for k, v in store.records(TILE_STAGE).items() if v.get("params_hash") == h}
     todo_t = [t for t in tiles if str(t) not in done_t]
     done_r = {k for k, v in store.records(STAGE).items() if v.get("params_hash") == h}
