@@ -304,6 +304,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY.PATH=VALUE",
                    help="override a workflow value, e.g. --set coarse.epsilon=0.05 (repeatable)")
     r.add_argument("--schema", action="store_true", help="print the workflow JSON Schema and exit")
+    r.add_argument("--job-script", action="store_true",
+                   help="print the batch script of one job of cluster.jobqueue and exit (nothing is submitted)")
     r.add_argument("--no-progress", action="store_true", help="no progress bars")
     r.set_defaults(func=_cmd_run)
 
@@ -464,6 +466,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if args.scheduler:
         overrides.append(f"cluster.scheduler={args.scheduler}")
     wf = load_workflow(args.workflow, overrides)
+    if args.job_script:
+        if wf.cluster.jobqueue is None:
+            raise WorkflowError(f"{args.workflow}: cluster.jobqueue: --job-script needs a jobqueue section")
+        from hollowtree.pipeline.clusters import job_script
+
+        sys.stdout.write(job_script(wf.cluster.jobqueue))
+        return 0
     from hollowtree.pipeline.run import run_workflow
 
     try:

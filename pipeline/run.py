@@ -157,6 +157,12 @@ def run_workflow(
     from hollowtree.tiling.lock import StoreLock
     from hollowtree.tiling.store import RunStore, check_writable
 
+    if client is None and (wf.cluster.jobqueue is not None or wf.cluster.kubernetes is not None):
+        from hollowtree.pipeline.clusters import open_cluster
+
+        check_writable(wf.store)  # before any job is submitted
+        with open_cluster(wf.cluster) as cluster_client:
+            return run_workflow(wf, progress=progress, say=say, client=cluster_client)
     t0 = time.perf_counter()
     url = wf.store
     report = RunReport(store=url)

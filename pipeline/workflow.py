@@ -187,8 +187,37 @@ class TreeSection(_Section):
         return v
 
 
+class JobqueueSection(_Section):
+    """Workers as batch jobs (dask-jobqueue): each job runs ``processes`` workers."""
+
+    system: Literal["slurm", "pbs", "sge", "lsf"] = Field(description="the batch system")
+    jobs: PosInt = Field(1, description="jobs to submit")
+    cores: PosInt = Field(description="cores per job")
+    memory: str = Field(description="memory per job, e.g. 32GiB")
+    processes: PosInt = Field(1, description="worker processes per job (the cores and memory are shared)")
+    walltime: str = Field("01:00:00", description="time limit per job, HH:MM:SS")
+    queue: str | None = Field(None, description="queue or partition")
+    account: str | None = Field(None, description="account (project) the jobs are charged to")
+    job_extra: list[str] = Field(default_factory=list, description="extra directives, e.g. ['--gres=gpu:1']")
+    prologue: list[str] = Field(default_factory=list,
+                                description="shell lines before the worker starts, e.g. ['module load python']")
+    log_directory: str | None = Field(None, description="folder for the jobs' output files")
+
+
+class KubernetesSection(_Section):
+    """Workers as pods (dask-kubernetes' operator, which must be installed in the cluster)."""
+
+    image: str = Field(description="a container image with hollowtree installed")
+    workers: PosInt = Field(2, description="worker pods")
+    cpu: float = Field(2.0, gt=0, description="CPUs per worker pod")
+    memory: str = Field("8Gi", description="memory per worker pod, e.g. 8Gi")
+    namespace: str | None = Field(None, description="namespace; null = the current context's")
+    env: dict[str, str] = Field(default_factory=dict, description="environment of the pods (e.g. S3 credentials)")
+
+
 class ClusterSection(_Section):
-    """Where the tasks run."""
+    """Where the tasks run: a local cluster (the default), a scheduler address, batch jobs
+    (``jobqueue``) or Kubernetes pods (``kubernetes``); at most one of the last three."""
 
     scheduler: str | None = Field(None, description="Dask scheduler address; null = a local cluster; 'sync' = in process")
     workers: PosInt = Field(2, description="workers of the local cluster")
@@ -196,6 +225,16 @@ class ClusterSection(_Section):
         2_000_000, ge=0,
         description="a local run (scheduler null) of a scan with fewer input points runs its tasks in this "
                     "process, with no cluster to start; 0 = always a cluster")
+    jobqueue: JobqueueSection | None = Field(None, description="workers as SLURM/PBS/SGE/LSF jobs (dask-jobqueue)")
+    kubernetes: KubernetesSection | None = Field(None, description="workers as Kubernetes pods (dask-kubernetes)")
+
+    @model_validator(mode="after")
+    def _one_place(self) -> ClusterSection:
+        named = [k for k in ("scheduler", "jobqueue", "kubernetes") if getattr(self, k) is not None]
+        if len(named) > 1:
+            raise ValueError(f"give at most one of cluster.scheduler, cluster.jobqueue and cluster.kubernetes "
+                             f"(got {', '.join(named)})")
+        return self
 
 
 class OutputsSection(_Section):
