@@ -64,12 +64,11 @@ def open(store: str | Path) -> LabelledScan:  # noqa: A001  (hollowtree.open, as
     hollowtree.tiling.errors.PipelineError
         The store does not exist, is not a hollowtree store, or has no complete labels.
     """
+    from hollowtree.pipeline.labels import require_labels
     from hollowtree.tiling.store import RunStore
 
     rs = RunStore.open(store)
-    lab = rs.attrs.get("stages", {}).get("labels")
-    if not lab or lab.get("done") != lab.get("units"):
-        raise PipelineError(f"store {rs.url} has no complete labels; run `hollowtree run` first")
+    require_labels(rs)
     return LabelledScan(rs)
 
 

@@ -39,11 +39,11 @@ from typing import Any
 
 import numpy as np
 
-from hollowtree.pipeline.labels import LEAF_BITS
+from hollowtree.pipeline.labels import LEAF_BITS, require_labels
 from hollowtree.pipeline.workflow import shipped_workflows
 from hollowtree.scenes.metrics import Evaluation, LabelCounts, count_labels, score_counts
 from hollowtree.tiling.classes import ELEMENT_CLASSES
-from hollowtree.tiling.errors import ConfigError, InputFileError, PipelineError
+from hollowtree.tiling.errors import ConfigError, InputFileError
 from hollowtree.tiling.readers import SUFFIXES, probe, read_blocks
 from hollowtree.tiling.store import RunStore
 
@@ -213,12 +213,6 @@ def _check_gt(path: str) -> None:
                               f"({' and '.join(GT_DIMS)})")
 
 
-def _require_labels(store: RunStore) -> None:
-    lab = store.attrs.get("stages", {}).get("labels")
-    if not lab or lab.get("done") != lab.get("units"):
-        raise PipelineError(f"store {store.url} has no complete labels; run `hollowtree run` on it first")
-
-
 def evaluate_store(
     store: RunStore, *, name: str, input_: str = "", pipeline_seconds: float | None = None,
     pipeline_log: Sequence[str] = (), iou_threshold: float = 0.5, n_sample: int = 200_000,
@@ -232,7 +226,7 @@ def evaluate_store(
     from hollowtree.hollownet.predict import Classifier
 
     t0 = time.perf_counter()
-    _require_labels(store)
+    require_labels(store)
     attrs = store.attrs
     sources = attrs["sources"]
     for s in sources:

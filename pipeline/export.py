@@ -36,6 +36,7 @@ import laspy
 import numpy as np
 from laspy.vlrs.known import ClassificationLookupVlr
 
+from hollowtree.pipeline.labels import require_labels
 from hollowtree.tiling.classes import CLASS_NAMES, NUM_CLASSES, ClassId
 from hollowtree.tiling.errors import ConfigError, PipelineError
 from hollowtree.tiling.readers import las_crs, read_blocks
@@ -85,13 +86,6 @@ _CHUNK = 1_000_000
 
 def _tmp(path: Path) -> Path:
     return path.with_name(f".{path.name}.partial")
-
-
-def _require_labels(store: RunStore) -> None:
-    stages = store.attrs.get("stages", {})
-    lab = stages.get("labels")
-    if not lab or lab.get("done") != lab.get("units"):
-        raise PipelineError(f"store {store.url} has no complete labels; run `hollowtree run` first")
 
 
 def _out_header(sources: list[dict[str, Any]]) -> laspy.LasHeader:
@@ -151,7 +145,7 @@ def export_las(store: RunStore, out: str | Path, *, progress: bool = False) -> i
     """Write every input point with its labels to ``out`` (.las or .laz); return the count."""
     from tqdm import tqdm
 
-    _require_labels(store)
+    require_labels(store)
     out = Path(out)
     if out.suffix.lower() not in (".las", ".laz"):
         raise ConfigError(f"--las {out}: the file name must end in .las or .laz")
@@ -356,7 +350,7 @@ def export_png(store: RunStore, out: str | Path, *, n_max: int = 400_000) -> Pat
     import matplotlib.pyplot as plt
     from matplotlib.patches import Patch
 
-    _require_labels(store)
+    require_labels(store)
     out = Path(out)
     if not out.parent.is_dir():
         raise ConfigError(f"--png {out}: folder {out.parent} does not exist")

@@ -311,6 +311,13 @@ class LabelsReport:
                 f"{self.ranges_skipped} skipped; {self.seconds:.1f} s")
 
 
+def require_labels(store: RunStore) -> None:
+    """Raise a one-line ``PipelineError`` unless ``store``'s labels stage is complete."""
+    lab = store.attrs.get("stages", {}).get(STAGE)
+    if not lab or lab.get("done") != lab.get("units"):
+        raise PipelineError(f"store {store.url} has no complete labels; run `hollowtree run` first")
+
+
 def labels_hash(attrs: dict[str, Any], *, use_tree: bool) -> str:
     """The labels' parameters hash: that of the stage they are read from."""
     stages = attrs.get("stages", {})
