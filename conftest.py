@@ -19,14 +19,16 @@ PACKAGES = ("tiling", "primitives", "scenes", "hollownet", "tree", "pipeline")
 
 
 def module_name(path: Path) -> str | None:
-    """``tiling/grid.py`` -> ``hollowtree.tiling.grid``; None outside the packages."""
+    """``tiling/grid.py`` -> ``hollowtree.tiling.grid``, ``hollowtree/errors.py`` ->
+    ``hollowtree.errors``; None outside the package (and for ``__main__``)."""
     try:
         rel = path.resolve().relative_to(REPO).with_suffix("")
     except ValueError:
         return None
-    if not rel.parts or rel.parts[0] not in PACKAGES:
+    if not rel.parts or rel.name == "__main__" or rel.parts[0] not in ("hollowtree", *PACKAGES):
         return None
-    parts = rel.parts[:-1] if rel.name == "__init__" else rel.parts
+    parts = rel.parts[1:] if rel.parts[0] == "hollowtree" else rel.parts  # hollowtree/errors.py
+    parts = parts[:-1] if rel.name == "__init__" else parts
     return ".".join(("hollowtree", *parts))
 
 

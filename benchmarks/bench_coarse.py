@@ -60,7 +60,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-# Ground-truth classes evaluated (tiling/classes.py ids) and their groups.
+# Ground-truth classes evaluated (hollowtree/classes.py ids) and their groups.
 GROUND, WALL, ROOF, ARCH, DOME, MINARET, PILLAR = 1, 2, 3, 4, 5, 6, 7
 EVAL_CLASSES = (GROUND, WALL, ROOF, ARCH, DOME, MINARET, PILLAR)
 GROUPS = {"planar": (GROUND, WALL, ROOF), "round": (DOME, MINARET, PILLAR), "arch": (ARCH,)}

@@ -39,11 +39,11 @@ if str(REPO) not in sys.path:
 
 import numpy as np  # noqa: E402
 
+from hollowtree.classes import ELEMENT_CLASSES, ClassId  # noqa: E402
 from hollowtree.pipeline.evaluate import evaluate_inputs  # noqa: E402
 from hollowtree.pipeline.tree_stage import TREE_ALGORITHM  # noqa: E402
 from hollowtree.scenes.procedural import FAMILIES, family_of, scan_draw, split_seeds  # noqa: E402
 from hollowtree.scenes.synth import synth  # noqa: E402
-from hollowtree.tiling.classes import ELEMENT_CLASSES, ClassId  # noqa: E402
 
 METHODS = {"tree": ("tree", []), "energy": ("tree", ["tree.decision=energy"]),
            "ransac+dbscan": ("ransac+dbscan", [])}

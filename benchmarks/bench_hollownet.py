@@ -21,6 +21,7 @@ import time
 import numpy as np
 import torch
 
+from hollowtree.classes import ClassId
 from hollowtree.hollownet.dataset import DatasetParams, generate_samples
 from hollowtree.hollownet.model import DEFAULT_WEIGHTS, OUTPUT_CLASSES
 from hollowtree.hollownet.predict import Classifier
@@ -28,7 +29,6 @@ from hollowtree.hollownet.train import confusion_matrix, format_confusion
 from hollowtree.hollownet.voxels import voxelize, voxelize_batch
 from hollowtree.scenes.scanner import ScanParams, scan
 from hollowtree.scenes.sites import build_scene
-from hollowtree.tiling.classes import ClassId
 
 
 def _best_ms(fn, repeat: int) -> float:

@@ -58,9 +58,9 @@ if str(REPO) not in sys.path:
 
 from scipy.spatial import cKDTree  # noqa: E402
 
+from hollowtree.classes import NUM_CLASSES, ClassId  # noqa: E402
 from hollowtree.scenes.scanner import ScanParams, scan  # noqa: E402
 from hollowtree.scenes.sites import build_scene  # noqa: E402
-from hollowtree.tiling.classes import NUM_CLASSES, ClassId  # noqa: E402
 from hollowtree.tree import build_tree  # noqa: E402
 from hollowtree.tree.operators import TransportCurve, h, p, psi, rho, u, v1, v2  # noqa: E402
 from hollowtree.tree.sequences import SequenceParams, propose, s1, s2, s3  # noqa: E402

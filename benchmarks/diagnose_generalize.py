@@ -26,9 +26,9 @@ if str(REPO) not in sys.path:
 
 import numpy as np  # noqa: E402
 
+from hollowtree.classes import ELEMENT_CLASSES, ClassId  # noqa: E402
 from hollowtree.pipeline.labels import LEAF_BITS  # noqa: E402
 from hollowtree.scenes.metrics import LOSS_BUCKETS, loss_buckets  # noqa: E402
-from hollowtree.tiling.classes import ELEMENT_CLASSES, ClassId  # noqa: E402
 from hollowtree.tiling.readers import PointBlock, read_blocks  # noqa: E402
 from hollowtree.tiling.store import RunStore  # noqa: E402
 

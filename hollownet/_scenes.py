@@ -14,6 +14,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from hollowtree.classes import ClassId
 from hollowtree.scenes._builders import add_arcade
 from hollowtree.scenes.elements import (
     ArcPath,
@@ -37,7 +38,6 @@ from hollowtree.scenes.elements import (
 from hollowtree.scenes.mesh import TriMesh
 from hollowtree.scenes.scene import Scene, SceneBuilder
 from hollowtree.scenes.shapes import box, ellipsoid
-from hollowtree.tiling.classes import ClassId
 
 __all__ = ["RECIPES", "random_scene", "storeyed_arcades"]
 

@@ -39,12 +39,12 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from hollowtree.classes import ELEMENT_CLASSES, ClassId
+from hollowtree.errors import ConfigError, CorruptInputError, InputFileError
 from hollowtree.hollownet._scenes import RECIPES, random_scene
 from hollowtree.hollownet.model import OUTPUT_CLASSES
 from hollowtree.hollownet.voxels import GRID_SIZE, OCCUPIED, voxelize_batch
 from hollowtree.scenes.scanner import ScanParams, scan
-from hollowtree.tiling.classes import ELEMENT_CLASSES, ClassId
-from hollowtree.tiling.errors import ConfigError, CorruptInputError, InputFileError
 
 __all__ = [
     "DATASET_VERSION",

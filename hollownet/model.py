@@ -3,7 +3,7 @@
 The paper's network: Conv3d with 32 filters of 5^3, Conv3d with 64 filters of 5^3 and
 stride 2 (the stride replaces pooling), a Leaky ReLU after each, then two fully connected
 layers, the last with ``K`` outputs. ``K`` comes from the class vocabulary
-(:mod:`tiling.classes`): every class except ``unclassified`` (the element classes, the
+(:mod:`hollowtree.classes`): every class except ``unclassified`` (the element classes, the
 planar classes and ``other``), in id order: see :data:`OUTPUT_CLASSES`.
 
 Sizes the paper leaves open, chosen to keep the model small and fast (``docs/method.md``, "HollowNet"):
@@ -30,8 +30,8 @@ from typing import Any
 import torch
 from torch import nn
 
-from hollowtree.tiling.classes import CLASS_NAMES, ELEMENT_CLASSES, PLANAR_CLASSES, ClassId
-from hollowtree.tiling.errors import InputFileError, PipelineError
+from hollowtree.classes import CLASS_NAMES, ELEMENT_CLASSES, PLANAR_CLASSES, ClassId
+from hollowtree.errors import InputFileError, PipelineError
 
 __all__ = [
     "CHECKPOINT_VERSION",

@@ -22,11 +22,11 @@ import numpy as np
 import numpy.typing as npt
 import torch
 
+from hollowtree.classes import ClassId
+from hollowtree.columns import column_span
+from hollowtree.errors import ConfigError
 from hollowtree.hollownet.model import DEFAULT_WEIGHTS, OUTPUT_CLASSES, load_model
 from hollowtree.hollownet.voxels import GRID_SIZE, voxelize_batch
-from hollowtree.tiling.classes import ClassId
-from hollowtree.tiling.columns import column_span
-from hollowtree.tiling.errors import ConfigError
 
 __all__ = ["Classifier", "Prediction", "default_threads"]
 
@@ -58,7 +58,7 @@ class Prediction:
     Attributes
     ----------
     class_id : ndarray of shape (n_segments,), uint8
-        :class:`~tiling.classes.ClassId` values.
+        :class:`~hollowtree.classes.ClassId` values.
     score : ndarray of shape (n_segments,), float32
         Probability of the predicted class (0 for a segment that could not be classified).
     probabilities : ndarray of shape (n_segments, K), float32

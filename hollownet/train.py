@@ -38,6 +38,8 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
+from hollowtree.classes import CLASS_NAMES
+from hollowtree.errors import ConfigError, OutputExistsError
 from hollowtree.hollownet._png import confusion_png
 from hollowtree.hollownet.dataset import DatasetParams, build_dataset, load_dataset
 from hollowtree.hollownet.model import (
@@ -47,8 +49,6 @@ from hollowtree.hollownet.model import (
     load_checkpoint,
     save_checkpoint,
 )
-from hollowtree.tiling.classes import CLASS_NAMES
-from hollowtree.tiling.errors import ConfigError, OutputExistsError
 
 __all__ = ["TrainConfig", "TrainReport", "confusion_matrix", "format_confusion", "grids_to_input",
            "default_data_dir", "resolve_device", "train", "evaluate"]

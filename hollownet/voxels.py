@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from hollowtree.tiling.errors import PipelineError
+from hollowtree.errors import PipelineError
 
 __all__ = [
     "EMPTY",

@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
+from hollowtree.classes import CLASS_NAMES
+from hollowtree.errors import PipelineError
 from hollowtree.pipeline.workflow import Workflow, load_workflow
-from hollowtree.tiling.classes import CLASS_NAMES
-from hollowtree.tiling.errors import PipelineError
 
 __all__ = ["LabelledScan", "open", "run"]
 
@@ -41,7 +41,7 @@ def run(workflow: str | Path | Workflow, client: Any = None, *, overrides: Seque
 
     Raises
     ------
-    hollowtree.tiling.errors.PipelineError
+    hollowtree.errors.PipelineError
         One line naming the file or key and what is wrong (``WorkflowError``, ``ConfigError``, ...).
     """
     from hollowtree.pipeline.run import run_workflow
@@ -61,7 +61,7 @@ def open(store: str | Path) -> LabelledScan:  # noqa: A001  (hollowtree.open, as
 
     Raises
     ------
-    hollowtree.tiling.errors.PipelineError
+    hollowtree.errors.PipelineError
         The store does not exist, is not a hollowtree store, or has no complete labels.
     """
     from hollowtree.pipeline.labels import require_labels

@@ -1,7 +1,7 @@
 """The ``hollowtree`` command.
 
 Logging handlers and progress bars are set up here and nowhere else. Every expected
-failure (a :class:`tiling.errors.PipelineError`) becomes one line on stderr and exit
+failure (a :class:`hollowtree.errors.PipelineError`) becomes one line on stderr and exit
 code 2; nothing is written in that case.
 """
 
@@ -15,7 +15,7 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
-from hollowtree.tiling.errors import PipelineError
+from hollowtree.errors import PipelineError
 
 __all__ = ["main", "build_parser"]
 
@@ -402,7 +402,7 @@ def _cmd_labels(args: argparse.Namespace) -> int:
 
 
 def _cmd_fit_energy(args: argparse.Namespace) -> int:
-    from hollowtree.tiling.errors import ConfigError
+    from hollowtree.errors import ConfigError
     from hollowtree.tree.fit import fit_energy_from_scenes
 
     if args.out.exists() and not args.overwrite:
@@ -419,10 +419,10 @@ def _cmd_fit_energy(args: argparse.Namespace) -> int:
 def _cmd_fit_split(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from hollowtree.errors import ConfigError
     from hollowtree.pipeline.hollownet_cmd import class_map_of
     from hollowtree.pipeline.split_fit import TRAINING_SCENES, fit_split_from_scenes
     from hollowtree.scenes.procedural import split_seeds
-    from hollowtree.tiling.errors import ConfigError
 
     if args.out.exists() and not args.overwrite:
         raise ConfigError(f"{args.out} exists; pass --overwrite to replace it")
@@ -506,8 +506,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 def _cmd_init(args: argparse.Namespace) -> int:
     import shutil
 
+    from hollowtree.errors import ConfigError, OutputExistsError
     from hollowtree.pipeline.workflow import shipped_workflows
-    from hollowtree.tiling.errors import ConfigError, OutputExistsError
 
     src = sorted(p for p in shipped_workflows().iterdir() if p.suffix in (".yaml", ".json"))
     if args.dir.exists() and not args.dir.is_dir():
@@ -571,8 +571,8 @@ def _wave_line(w: Any) -> str:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
+    from hollowtree.errors import ConfigError
     from hollowtree.pipeline.export import export_las, export_parquet, export_png, style_paths
-    from hollowtree.tiling.errors import ConfigError
     from hollowtree.tiling.store import RunStore
 
     if not (args.las or args.parquet or args.png):
@@ -634,8 +634,8 @@ def _int_list(text: str) -> tuple[int, ...]:
 def _cmd_ingest(args: argparse.Namespace) -> int:
     import gc
 
+    from hollowtree.errors import ConfigError
     from hollowtree.pipeline.graph import task_runner, timed_stage, tune_process_for_streaming
-    from hollowtree.tiling.errors import ConfigError
     from hollowtree.tiling.ingest import IngestParams, ingest
 
     params = IngestParams(

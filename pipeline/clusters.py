@@ -13,7 +13,7 @@ import contextlib
 from collections.abc import Iterator
 from typing import Any
 
-from hollowtree.tiling.errors import ConfigError
+from hollowtree.errors import ConfigError
 
 __all__ = ["JOBQUEUE_SYSTEMS", "job_script", "kubernetes_spec", "open_cluster"]
 

@@ -32,6 +32,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from hollowtree.errors import ConfigError, PipelineError
 from hollowtree.pipeline.graph import in_child
 from hollowtree.primitives.blocks import block_context, split_blocks
 from hollowtree.primitives.dbscan import dbscan_segments, sparse_points, window_spacing
@@ -46,7 +47,6 @@ from hollowtree.primitives.normals import estimate_normals
 from hollowtree.primitives.ransac import RansacParams, efficient_ransac
 from hollowtree.primitives.score import load_kernels
 from hollowtree.primitives.stitch import UnionFind
-from hollowtree.tiling.errors import ConfigError, PipelineError
 from hollowtree.tiling.grid import TileGrid
 from hollowtree.tiling.store import CHUNK_POINTS, RunStore
 

@@ -39,11 +39,11 @@ from typing import Any
 
 import numpy as np
 
+from hollowtree.classes import ELEMENT_CLASSES
+from hollowtree.errors import ConfigError, InputFileError
 from hollowtree.pipeline.labels import LEAF_BITS, require_labels
 from hollowtree.pipeline.workflow import shipped_workflows
 from hollowtree.scenes.metrics import Evaluation, LabelCounts, count_labels, score_counts
-from hollowtree.tiling.classes import ELEMENT_CLASSES
-from hollowtree.tiling.errors import ConfigError, InputFileError
 from hollowtree.tiling.readers import SUFFIXES, probe, read_blocks
 from hollowtree.tiling.store import RunStore
 
@@ -352,8 +352,8 @@ def draw_panels(sample: dict[str, np.ndarray], out: Path, *, title: str) -> Path
     import matplotlib.pyplot as plt
     from matplotlib.patches import Patch
 
+    from hollowtree.classes import CLASS_NAMES
     from hollowtree.pipeline.export import CLASS_COLOURS
-    from hollowtree.tiling.classes import CLASS_NAMES
 
     uv, order = _oblique(sample["xyz"])
     span = np.ptp(uv, axis=0) if len(uv) else np.ones(2)

@@ -36,9 +36,9 @@ import laspy
 import numpy as np
 from laspy.vlrs.known import ClassificationLookupVlr
 
+from hollowtree.classes import CLASS_NAMES, NUM_CLASSES, ClassId
+from hollowtree.errors import ConfigError, PipelineError
 from hollowtree.pipeline.labels import require_labels
-from hollowtree.tiling.classes import CLASS_NAMES, NUM_CLASSES, ClassId
-from hollowtree.tiling.errors import ConfigError, PipelineError
 from hollowtree.tiling.readers import las_crs, read_blocks
 from hollowtree.tiling.store import RunStore
 

@@ -2,7 +2,7 @@
 default workflow, in process, and the checks every result must pass.
 
 A scan may legitimately be refused only when its file holds no point at all (a
-:class:`~tiling.errors.PipelineError`, one line). Every other scan, however degenerate, must
+:class:`~hollowtree.errors.PipelineError`, one line). Every other scan, however degenerate, must
 run to the end: every input point gets a label (class 0 where nothing could be said), the
 LAZ output holds every input point in input order, and the run's tables and picture are
 written. Anything else is a bug and is reported with its traceback.
@@ -24,10 +24,10 @@ import laspy
 import numpy as np
 import yaml
 
+from hollowtree.classes import NUM_CLASSES
+from hollowtree.errors import PipelineError
 from hollowtree.pipeline.workflow import shipped_workflows
 from hollowtree.scenes.fuzz import FuzzSpec, fuzz_points
-from hollowtree.tiling.classes import NUM_CLASSES
-from hollowtree.tiling.errors import PipelineError
 
 __all__ = ["DEFAULT_WORKFLOW", "FuzzOutcome", "run_fuzz", "write_points"]
 

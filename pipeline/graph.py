@@ -32,7 +32,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from hollowtree.tiling.errors import PipelineError
+from hollowtree.errors import PipelineError
 
 __all__ = ["fresh_workers", "in_child", "task_runner", "task_seconds", "timed_stage", "tune_process_for_streaming"]
 

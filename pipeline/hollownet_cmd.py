@@ -2,7 +2,7 @@
 
 ``pipeline/cli.py`` adds them with :func:`add_parsers`; until it does, ``python -m
 pipeline.hollownet_cmd train ...`` runs the same commands with the same error handling
-(a :class:`~tiling.errors.PipelineError` becomes one line on stderr and exit code 2).
+(a :class:`~hollowtree.errors.PipelineError` becomes one line on stderr and exit code 2).
 
 - ``train [--config FILE] [--epochs N] [--device auto|cpu|cuda] [--out FILE] [--resume]``:
   builds (or reuses) the cached data set, trains with a progress bar (loss, accuracy), a
@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+from hollowtree.errors import ConfigError, InputFileError, PipelineError
 from hollowtree.pipeline.cli import _positive_int
-from hollowtree.tiling.errors import ConfigError, InputFileError, PipelineError
 
 __all__ = ["add_labelled_args", "add_parsers", "class_map_of", "cmd_classify", "cmd_train", "procedural_samples",
            "read_labelled"]
@@ -186,7 +186,7 @@ def add_labelled_args(p: argparse.ArgumentParser, what: str) -> None:
 
 def class_map_of(text: str | None) -> dict[int, int] | None:
     """``"2=ground,64=arch"`` -> ``{2: 1, 64: 4}``; None stays None."""
-    from hollowtree.tiling.classes import class_id
+    from hollowtree.classes import class_id
 
     if text is None:
         return None
@@ -211,7 +211,7 @@ def read_labelled(path: Path, class_dim: str, instance_dim: str, class_map: dict
         If the file lacks either dimension (the message lists the ones it has) or a
         class is not a hollowtree class id (without ``class_map``).
     """
-    from hollowtree.tiling.classes import NUM_CLASSES
+    from hollowtree.classes import NUM_CLASSES
     from hollowtree.tiling.readers import PointBlock, read_blocks
 
     blocks = PointBlock.concat(read_blocks(path))
@@ -283,8 +283,8 @@ def _csr_points_from_tiles(store: Any, path: Path, scale: np.ndarray) -> np.ndar
 
 def cmd_classify(args: argparse.Namespace) -> int:
     """``hollowtree classify``."""
+    from hollowtree.classes import ClassId
     from hollowtree.hollownet.predict import Classifier
-    from hollowtree.tiling.classes import ClassId
 
     path: Path = args.input
     if not path.exists():

@@ -17,7 +17,7 @@ Two phases of Dask tasks, each unit recorded after its data like every other sta
 
 Arrays written (``docs/store.md``), each of length = the number of input points::
 
-    labels/class      uint8    the class vocabulary (tiling/classes.py); 0 = not labelled
+    labels/class      uint8    the class vocabulary (hollowtree/classes.py); 0 = not labelled
     labels/instance   uint32   element instance (or planar instance: one per planar class and element group), unique in the store; 0 = none
     labels/segment    uint64   tree leaf: global coarse segment << 20 | leaf node id; 0 = none
     labels/score      float32  the classifier's score of the point's class
@@ -42,12 +42,12 @@ from typing import Any
 
 import numpy as np
 
+from hollowtree.classes import NUM_CLASSES, ClassId
+from hollowtree.errors import PipelineError
 from hollowtree.pipeline.coarse import MAX_SPACING
 from hollowtree.pipeline.graph import in_child
 from hollowtree.pipeline.tree_stage import MERGE_CLASS_MAP, MERGE_MAP, ROWS
 from hollowtree.primitives.terrain import smrf_ground
-from hollowtree.tiling.classes import NUM_CLASSES, ClassId
-from hollowtree.tiling.errors import PipelineError
 from hollowtree.tiling.grid import TileGrid
 from hollowtree.tiling.store import CHUNK_POINTS, RunStore
 from hollowtree.tree.rows import ArcadeCells, apply_cells

@@ -22,12 +22,12 @@ from typing import Any
 
 import numpy as np
 
+from hollowtree.classes import CLASS_NAMES
+from hollowtree.errors import ConfigError
 from hollowtree.pipeline.coarse import COARSE_ALGORITHM
 from hollowtree.pipeline.graph import timed_stage
 from hollowtree.pipeline.tree_stage import TREE_ALGORITHM
 from hollowtree.pipeline.workflow import Workflow
-from hollowtree.tiling.classes import CLASS_NAMES
-from hollowtree.tiling.errors import ConfigError
 
 __all__ = ["run_workflow", "RunReport", "STAGE_ORDER", "changed_stages", "make_synthetic_input"]
 

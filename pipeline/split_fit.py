@@ -104,8 +104,8 @@ def training_groups(i: int, work: Path) -> Path:
 def check_training_seed(seed: int, what: str) -> None:
     """Raise a ConfigError unless ``seed`` is a training seed of ``scenes.procedural``
     (``what``: the learned part, e.g. "HollowNet is trained")."""
+    from hollowtree.errors import ConfigError
     from hollowtree.scenes.procedural import SPLITS
-    from hollowtree.tiling.errors import ConfigError
 
     lo, hi = SPLITS["train"]
     if not lo <= seed < hi:
@@ -177,8 +177,8 @@ def fit_split_from_scenes(work: Path, *, scenes: tuple[int, ...] = TRAINING_SCEN
                           procedural: tuple[int, ...] = (), procedural_points: int = 600_000):  # type: ignore[no-untyped-def]
     """Make (or reuse) the groups of every scene, procedural training site and labelled
     file in ``work``, collect the proposals, fit. ``scenes=()`` leaves the random scenes out."""
+    from hollowtree.errors import ConfigError
     from hollowtree.hollownet.predict import Classifier
-    from hollowtree.tiling.errors import ConfigError
     from hollowtree.tree.fit_split import (
         GOOD_TARGET,
         SplitSamples,

@@ -39,10 +39,10 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from hollowtree.classes import PLANAR_CLASSES, ClassId
+from hollowtree.errors import ConfigError, PipelineError
 from hollowtree.pipeline.coarse import _read_table, _write_table
 from hollowtree.pipeline.graph import in_child
-from hollowtree.tiling.classes import PLANAR_CLASSES, ClassId
-from hollowtree.tiling.errors import ConfigError, PipelineError
 from hollowtree.tiling.store import RunStore
 from hollowtree.tree.tall import short_minarets, size_rules, slender_domes
 

@@ -24,7 +24,7 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from hollowtree.tiling.errors import ConfigError
+from hollowtree.errors import ConfigError
 
 __all__ = ["Workflow", "WorkflowError", "load_workflow", "json_schema", "apply_override", "shipped_workflows"]
 

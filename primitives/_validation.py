@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from hollowtree.tiling.errors import ConfigError
+from hollowtree.errors import ConfigError
 
 
 def as_xyz(xyz: object, func: str) -> npt.NDArray[np.float64]:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from hollowtree.tiling.errors import ConfigError
+from hollowtree.errors import ConfigError
 
 __all__ = ["split_blocks", "block_context"]
 

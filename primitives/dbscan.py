@@ -28,10 +28,10 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
+from hollowtree.columns import column_min
+from hollowtree.errors import ConfigError
 from hollowtree.primitives._validation import as_xyz as _as_xyz
 from hollowtree.primitives.stitch import UnionFind
-from hollowtree.tiling.columns import column_min
-from hollowtree.tiling.errors import ConfigError
 
 __all__ = ["dbscan_labels", "dbscan_segments", "default_eps", "sparse_points", "window_spacing"]
 

@@ -17,9 +17,9 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
+from hollowtree.columns import column_max, column_min
+from hollowtree.errors import ConfigError
 from hollowtree.primitives._validation import as_xyz
-from hollowtree.tiling.columns import column_max, column_min
-from hollowtree.tiling.errors import ConfigError
 
 __all__ = ["box_plane_distance", "large_segments", "segment_contacts", "segment_contacts_chunked", "set_in_plane",
            "stacked_pairs"]

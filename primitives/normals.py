@@ -22,8 +22,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
+from hollowtree.errors import ConfigError
 from hollowtree.primitives._validation import as_xyz as _as_xyz
-from hollowtree.tiling.errors import ConfigError
 
 __all__ = ["NormalResult", "estimate_normals"]
 

@@ -82,6 +82,8 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from hollowtree.columns import column_max, column_min, column_span
+from hollowtree.errors import ConfigError
 from hollowtree.primitives.score import (
     FUSED_KINDS,
     PointColumns,
@@ -102,8 +104,6 @@ from hollowtree.primitives.shapes import (
     surface_coordinates,
     to_fit,
 )
-from hollowtree.tiling.columns import column_max, column_min, column_span
-from hollowtree.tiling.errors import ConfigError
 
 __all__ = ["RansacParams", "RansacResult", "efficient_ransac"]
 

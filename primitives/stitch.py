@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from hollowtree.tiling.errors import ConfigError
+from hollowtree.errors import ConfigError
 
 __all__ = ["StitchResult", "UnionFind", "csr_by_segment", "stitch_segments"]
 

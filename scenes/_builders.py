@@ -10,11 +10,11 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from hollowtree.classes import ClassId
 from hollowtree.scenes.elements import ArcadeParts, bench, bicycle, car, ground, tree, wall
 from hollowtree.scenes.mesh import TriMesh
 from hollowtree.scenes.scene import SceneBuilder
 from hollowtree.scenes.shapes import ArcPath, StraightPath, wall_panel
-from hollowtree.tiling.classes import ClassId
 
 RngLike = int | np.random.Generator | np.random.SeedSequence | None
 EYE = 1.6  # scanner optical centre above the floor it stands on (m)

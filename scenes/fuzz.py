@@ -28,6 +28,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from hollowtree.classes import ClassId
+from hollowtree.errors import ConfigError
 from hollowtree.scenes._builders import EYE, Jitter, add_arcade, add_clutter
 from hollowtree.scenes.elements import (
     arcade,
@@ -42,8 +44,6 @@ from hollowtree.scenes.elements import (
 from hollowtree.scenes.scanner import RayCaster, ScanParams, estimate_step, scan
 from hollowtree.scenes.scene import Scene, SceneBuilder
 from hollowtree.scenes.shapes import ArcPath, StraightPath
-from hollowtree.tiling.classes import ClassId
-from hollowtree.tiling.errors import ConfigError
 
 __all__ = ["DEGENERATE_KINDS", "ELEMENT_KINDS", "FuzzSpec", "fuzz_points", "fuzz_scene", "fuzz_specs"]
 

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from hollowtree.tiling.classes import CLASS_NAMES, NUM_CLASSES, class_id
+from hollowtree.classes import CLASS_NAMES, NUM_CLASSES, class_id
 
 __all__ = ["LOSS_BUCKETS", "LabelCounts", "ClassScore", "Evaluation", "count_labels", "evaluate_labels", "loss_buckets",
            "score_counts"]

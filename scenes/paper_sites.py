@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from hollowtree.classes import ClassId
 from hollowtree.scenes._builders import (
     Jitter,
     RngLike,
@@ -33,7 +34,6 @@ from hollowtree.scenes.elements import (
 )
 from hollowtree.scenes.scene import Scene, SceneBuilder
 from hollowtree.scenes.shapes import ArcPath, StraightPath, slab, wall_panel
-from hollowtree.tiling.classes import ClassId
 
 __all__ = ["derawar", "khudabad", "roman", "temple", "wazir_khan"]
 

@@ -48,6 +48,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hollowtree.classes import ClassId
+from hollowtree.errors import ConfigError
 from hollowtree.scenes._builders import EYE
 from hollowtree.scenes.clutter import bench, bicycle, car, tree
 from hollowtree.scenes.elements import (
@@ -64,8 +66,6 @@ from hollowtree.scenes.elements import (
 from hollowtree.scenes.mesh import TriMesh, concat_meshes
 from hollowtree.scenes.scene import Scene, SceneBuilder
 from hollowtree.scenes.shapes import ArcPath, StraightPath, box, ellipsoid, frustum
-from hollowtree.tiling.classes import ClassId
-from hollowtree.tiling.errors import ConfigError
 
 __all__ = ["FAMILIES", "SPLITS", "ScanDraw", "family_of", "procedural_site", "scan_draw", "split_seeds"]
 

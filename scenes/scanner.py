@@ -26,9 +26,9 @@ import numpy as np
 import numpy.typing as npt
 from embreex import mesh_construction, rtcore_scene
 
+from hollowtree.classes import NUM_CLASSES
+from hollowtree.errors import ConfigError
 from hollowtree.scenes.scene import Scene
-from hollowtree.tiling.classes import NUM_CLASSES
-from hollowtree.tiling.errors import ConfigError
 
 __all__ = [
     "ScanParams",

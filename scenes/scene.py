@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from hollowtree.classes import ELEMENT_CLASSES, ClassId
 from hollowtree.scenes.mesh import TriMesh, concat_meshes
-from hollowtree.tiling.classes import ELEMENT_CLASSES, ClassId
 
 __all__ = ["Element", "Scene", "SceneBuilder"]
 

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hollowtree.classes import ClassId
 from hollowtree.scenes._builders import (
     EYE,
     Jitter,
@@ -52,7 +53,6 @@ from hollowtree.scenes.elements import (
 )
 from hollowtree.scenes.scene import Scene, SceneBuilder
 from hollowtree.scenes.shapes import ArcPath, StraightPath
-from hollowtree.tiling.classes import ClassId
 
 __all__ = ["GENERATED", "SITES", "TEST_SCENES", "SiteSpec", "UnknownSceneError", "build_scene", "scene_names"]
 

@@ -4,7 +4,7 @@ This is the edge of ``scenes/``: the only module here that imports laspy and pya
 The file gets point format 7 (XYZ, intensity, return info, gps_time, RGB), a scale of
 1 mm, survey-sized offsets (local (0, 0, 0) lies at E 500 000, N 3 500 000, H 200 m, so
 any float32 shortcut on the coordinates loses decimetres and fails loudly), the
-extra-bytes dimensions ``gt_class`` (uint8, :mod:`tiling.classes`) and ``gt_instance``
+extra-bytes dimensions ``gt_class`` (uint8, :mod:`hollowtree.classes`) and ``gt_instance``
 (uint32, 0 = none), and a ``hollowtree``/1 VLR holding the scan's settings and station
 positions as JSON. A Parquet sidecar ``<name>.elements.parquet`` lists the instances.
 
@@ -29,6 +29,8 @@ import numpy.typing as npt
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from hollowtree.classes import ELEMENT_CLASSES, NUM_CLASSES, ClassId
+from hollowtree.errors import ConfigError, InputFileError, OutputExistsError
 from hollowtree.scenes.scanner import (
     RayCaster,
     ScanParams,
@@ -39,8 +41,6 @@ from hollowtree.scenes.scanner import (
 )
 from hollowtree.scenes.scene import Scene
 from hollowtree.scenes.sites import GENERATED, SITES, TEST_SCENES, SiteSpec, build_scene
-from hollowtree.tiling.classes import ELEMENT_CLASSES, NUM_CLASSES, ClassId
-from hollowtree.tiling.errors import ConfigError, InputFileError, OutputExistsError
 
 __all__ = [
     "SURVEY_ORIGIN",

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
+from hollowtree.errors import ConfigError
 from hollowtree.pipeline.clusters import job_script, kubernetes_spec
 from hollowtree.pipeline.workflow import WorkflowError, load_workflow
-from hollowtree.tiling.errors import ConfigError
 
 BASE = "input: {files: [scan.laz]}\nstore: out/s.zarr\n"
 SLURM = """cluster:

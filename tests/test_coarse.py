@@ -12,13 +12,13 @@ import pyarrow.parquet as pq
 import pytest
 from sklearn.metrics import adjusted_rand_score
 
+from hollowtree.errors import ConfigError
 from hollowtree.pipeline.cli import main
 from hollowtree.pipeline.coarse import FALLBACK_EPS, CoarseParams, run_coarse
 from hollowtree.pipeline.graph import task_runner
 from hollowtree.pipeline.tree_stage import group_starts
 from hollowtree.primitives.dbscan import window_spacing
 from hollowtree.scenes.synth import synth
-from hollowtree.tiling.errors import ConfigError
 from hollowtree.tiling.ingest import IngestParams, ingest
 from hollowtree.tiling.store import RunStore
 

@@ -1,11 +1,11 @@
-"""tiling/columns.py: per-column extremes equal NumPy's axis-0 reductions."""
+"""hollowtree/columns.py: per-column extremes equal NumPy's axis-0 reductions."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from hollowtree.tiling.columns import column_max, column_min, column_span
+from hollowtree.columns import column_max, column_min, column_span
 
 
 @pytest.mark.parametrize("k", [1, 2, 3, 5])

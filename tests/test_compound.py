@@ -11,10 +11,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hollowtree.classes import ClassId
 from hollowtree.pipeline.run import run_workflow
 from hollowtree.pipeline.workflow import load_workflow
 from hollowtree.scenes.metrics import count_labels, score_counts
-from hollowtree.tiling.classes import ClassId
 from hollowtree.tiling.readers import PointBlock, read_blocks
 from hollowtree.tiling.store import RunStore
 

@@ -9,6 +9,7 @@ from sklearn.datasets import make_blobs
 from sklearn.metrics import adjusted_rand_score
 
 import hollowtree.primitives.dbscan as dbscan_module
+from hollowtree.errors import ConfigError
 from hollowtree.primitives.dbscan import (
     dbscan_labels,
     dbscan_segments,
@@ -16,7 +17,6 @@ from hollowtree.primitives.dbscan import (
     sparse_points,
     window_spacing,
 )
-from hollowtree.tiling.errors import ConfigError
 
 
 def _on_x(xs: list[float]) -> np.ndarray:

@@ -8,6 +8,7 @@ import laspy
 import numpy as np
 import pytest
 
+from hollowtree.classes import CLASS_NAMES, ClassId
 from hollowtree.pipeline.export import (
     CLASS_COLOURS,
     LAS_CLASSIFICATION,
@@ -16,7 +17,6 @@ from hollowtree.pipeline.export import (
     qgis_style,
     style_paths,
 )
-from hollowtree.tiling.classes import CLASS_NAMES, ClassId
 
 SHARED = {ClassId.UNCLASSIFIED, ClassId.OTHER}  # both are ASPRS 1
 

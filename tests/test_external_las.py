@@ -15,10 +15,10 @@ import laspy
 import numpy as np
 import pytest
 
+from hollowtree.classes import ClassId
 from hollowtree.pipeline.export import INPUT_CLASSIFICATION, SCAN_ANGLE_STEP, _remade
 from hollowtree.pipeline.run import run_workflow
 from hollowtree.pipeline.workflow import load_workflow
-from hollowtree.tiling.classes import ClassId
 
 REPO = Path(__file__).resolve().parents[1]
 EXTERNAL = REPO.parent / "shared" / "data" / "external"

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hollowtree.tiling.errors import ConfigError
+from hollowtree.errors import ConfigError
 from hollowtree.tiling.grid import TileGrid, morton_order
 
 # -- strategies -----------------------------------------------------------------------------

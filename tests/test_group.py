@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hollowtree.errors import ConfigError
 from hollowtree.pipeline.coarse import CoarseParams
 from hollowtree.primitives.group import (
     box_plane_distance,
@@ -14,7 +15,6 @@ from hollowtree.primitives.group import (
     set_in_plane,
     stacked_pairs,
 )
-from hollowtree.tiling.errors import ConfigError
 
 
 def _ring(n: int, r: float, z: float, rng: np.random.Generator) -> np.ndarray:

@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 from plyfile import PlyData, PlyElement
 
+from hollowtree.classes import CLASS_NAMES
 from hollowtree.pipeline.cli import main
 from hollowtree.pipeline.cli import main as hollowtree
 from hollowtree.pipeline.coarse import CoarseParams, run_coarse
 from hollowtree.pipeline.graph import task_runner
 from hollowtree.pipeline.hollownet_cmd import _csr_points_from_tiles
 from hollowtree.scenes.synth import synth
-from hollowtree.tiling.classes import CLASS_NAMES
 from hollowtree.tiling.ingest import IngestParams, ingest
 from hollowtree.tiling.store import RunStore
 

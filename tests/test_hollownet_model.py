@@ -7,6 +7,8 @@ import json
 import pytest
 import torch
 
+from hollowtree.classes import ELEMENT_CLASSES, NUM_CLASSES, PLANAR_CLASSES, ClassId
+from hollowtree.errors import InputFileError
 from hollowtree.hollownet.model import (
     DEFAULT_WEIGHTS,
     NUM_OUTPUTS,
@@ -18,8 +20,6 @@ from hollowtree.hollownet.model import (
     load_model,
     save_checkpoint,
 )
-from hollowtree.tiling.classes import ELEMENT_CLASSES, NUM_CLASSES, PLANAR_CLASSES, ClassId
-from hollowtree.tiling.errors import InputFileError
 
 
 def test_k_comes_from_the_vocabulary():

@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hollowtree.classes import ClassId
+from hollowtree.errors import ConfigError
 from hollowtree.hollownet.dataset import DatasetParams, generate_samples
 from hollowtree.hollownet.model import OUTPUT_CLASSES
 from hollowtree.hollownet.predict import Classifier
 from hollowtree.hollownet.train import confusion_matrix, format_confusion
-from hollowtree.tiling.classes import ClassId
-from hollowtree.tiling.errors import ConfigError
 
 #: Never used for training: the shipped weights saw seed 0, splits "train" and "test".
 HELDOUT_SEED = 20_261_122

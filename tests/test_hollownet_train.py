@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import torch
 
+from hollowtree.errors import ConfigError, OutputExistsError
 from hollowtree.hollownet.dataset import DatasetParams, build_dataset, load_dataset
 from hollowtree.hollownet.model import OUTPUT_CLASSES, load_checkpoint, load_model
 from hollowtree.hollownet.train import TrainConfig, train
-from hollowtree.tiling.errors import ConfigError, OutputExistsError
 
 
 @pytest.fixture(scope="module")

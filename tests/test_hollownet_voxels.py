@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hollowtree.errors import PipelineError
 from hollowtree.hollownet.voxels import (
     EMPTY,
     OCCUPIED,
@@ -13,7 +14,6 @@ from hollowtree.hollownet.voxels import (
     voxelize,
     voxelize_batch,
 )
-from hollowtree.tiling.errors import PipelineError
 
 
 def _box_surface(rng, n, size=(2.0, 1.0, 1.0)) -> np.ndarray:

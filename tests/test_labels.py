@@ -6,10 +6,10 @@ import laspy
 import numpy as np
 import pytest
 
+from hollowtree.classes import ClassId
 from hollowtree.pipeline.labels import LABEL_DTYPES, LEAF_BITS
 from hollowtree.pipeline.run import run_workflow
 from hollowtree.pipeline.workflow import load_workflow
-from hollowtree.tiling.classes import ClassId
 from hollowtree.tiling.grid import TileGrid
 from hollowtree.tiling.store import RunStore
 
@@ -313,8 +313,8 @@ def test_representatives_are_found_in_any_part_two_parts_held(tmp_path, monkeypa
     """The dropped points' lookup (labels._KeptParts) finds a representative in whichever
     part holds it, also behind the last part that answered, holds at most two parts, and
     names the tile when one is missing."""
+    from hollowtree.errors import PipelineError
     from hollowtree.pipeline.labels import _KeptParts
-    from hollowtree.tiling.errors import PipelineError
 
     rng = np.random.default_rng(0)
     index = rng.permutation(10_000).astype(np.uint64)
@@ -382,7 +382,7 @@ def test_tree_device_auto_on_a_cpu_machine_gives_the_cpu_labels(tmp_path, scan, 
     import torch
 
     import hollowtree.pipeline.tree_stage as tree_stage
-    from hollowtree.tiling.errors import ConfigError
+    from hollowtree.errors import ConfigError
 
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
     seen: list[str] = []
@@ -433,7 +433,7 @@ def test_open_reads_labels_points_and_tables(shallow_run, scan):
     an Arrow table of both, the segment and node tables; a store without labels or no
     store at all is one clear error."""
     import hollowtree
-    from hollowtree.tiling.errors import PipelineError
+    from hollowtree.errors import PipelineError
 
     folder, (_, want), _ = shallow_run
     res = hollowtree.open(folder / "s.zarr")

@@ -6,10 +6,15 @@ import ast
 from pathlib import Path
 
 import hollowtree.tree
-from hollowtree.tiling import classes
+from hollowtree import classes
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGES = ["pipeline", "tiling", "tree", "hollownet", "primitives", "scenes"]
+#: The ground floor: ``hollowtree/`` modules that every package may import.
+GROUND = {"classes", "errors", "columns"}
+#: Floors, lowest first: a module imports only from its own floor and those below.
+FLOOR = {"ground": 0, "tiling": 1, "primitives": 1, "scenes": 2, "hollownet": 2, "tree": 3, "pipeline": 4,
+         "api": 5}
 # Modules allowed to touch the outside world (files, CLI, cluster): the edges.
 EDGE_MODULES = {"pipeline/cli.py", "pipeline/export.py", "pipeline/fuzz.py", "pipeline/graph.py",
                 "pipeline/hollownet_cmd.py",
@@ -19,9 +24,14 @@ FORBIDDEN_IN_KERNELS = {"dask", "zarr", "laspy", "yaml"}
 
 
 def _top(name: str) -> str:
-    """The package an import names: ``hollowtree.tree.build`` -> ``tree``; ``numpy.linalg`` -> ``numpy``."""
+    """The floor or package an import names: ``hollowtree.tree.build`` -> ``tree``,
+    ``hollowtree.errors`` -> ``ground``, ``hollowtree`` -> ``api``; ``numpy.linalg`` -> ``numpy``."""
     parts = name.split(".")
-    return parts[1] if parts[0] == "hollowtree" and len(parts) > 1 else parts[0]
+    if parts[0] != "hollowtree":
+        return parts[0]
+    if len(parts) == 1:
+        return "api"
+    return "ground" if parts[1] in GROUND else "api" if parts[1] == "api" else parts[1]
 
 
 def _imports(path: Path) -> set[str]:
@@ -35,6 +45,8 @@ def _imports(path: Path) -> set[str]:
 
 
 def _modules():
+    for path in sorted((REPO / "hollowtree").glob("*.py")):
+        yield path.relative_to(REPO).as_posix(), path
     for pkg in PACKAGES:
         for path in sorted((REPO / pkg).rglob("*.py")):
             yield path.relative_to(REPO).as_posix(), path
@@ -72,10 +84,10 @@ def test_kernels_stay_pure():
 
 
 def test_class_vocabulary_is_defined_once():
-    """Class names appear as a table only in tiling/classes.py."""
+    """Class names appear as a table only in hollowtree/classes.py."""
     names = {"ground", "wall", "roof", "arch", "dome", "minaret", "pillar", "other"}
     for rel, path in _modules():
-        if rel == "tiling/classes.py":
+        if rel == "hollowtree/classes.py":
             continue
         tree_ = ast.parse(path.read_text())
         exported = {
@@ -94,9 +106,24 @@ def test_class_vocabulary_is_defined_once():
     assert classes.NUM_CLASSES == 9
 
 
+def _floor(rel: str) -> str:
+    top, name = rel.split("/")[0], Path(rel).stem
+    if top == "hollowtree":
+        return "ground" if name in GROUND else "api"
+    return top
+
+
 def test_no_upward_imports():
-    floor = {"tiling": 0, "primitives": 0, "scenes": 1, "hollownet": 1, "tree": 2, "pipeline": 3}
+    seen = set()
     for rel, path in _modules():
-        own = floor[rel.split("/")[0]]
-        for mod in _imports(path) & floor.keys():
-            assert floor[mod] <= own, f"{rel} imports {mod}, a floor above it"
+        own = FLOOR[_floor(rel)]
+        seen.add(_floor(rel))
+        for mod in _imports(path) & FLOOR.keys():
+            assert FLOOR[mod] <= own, f"{rel} imports {mod}, a floor above it"
+    assert seen == set(FLOOR)
+
+
+def test_the_ground_floor_imports_only_itself():
+    for name in sorted(GROUND):
+        path = REPO / "hollowtree" / f"{name}.py"
+        assert not (_imports(path) - {"ground", "__future__", "typing", "enum", "numpy", "dataclasses"}), name

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hollowtree.errors import ConfigError
 from hollowtree.primitives.normals import NormalResult, estimate_normals
-from hollowtree.tiling.errors import ConfigError
 
 
 def _plane(n: int, normal: np.ndarray, noise: float, rng: np.random.Generator) -> np.ndarray:

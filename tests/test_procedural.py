@@ -10,6 +10,8 @@ import laspy
 import numpy as np
 import pytest
 
+from hollowtree.classes import ClassId
+from hollowtree.errors import ConfigError
 from hollowtree.scenes.procedural import (
     FAMILIES,
     SPLITS,
@@ -19,8 +21,6 @@ from hollowtree.scenes.procedural import (
     split_seeds,
 )
 from hollowtree.scenes.sites import GENERATED, build_scene
-from hollowtree.tiling.classes import ClassId
-from hollowtree.tiling.errors import ConfigError
 
 
 @pytest.mark.parametrize("family", FAMILIES)

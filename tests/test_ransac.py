@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
+from hollowtree.errors import ConfigError
 from hollowtree.primitives.ransac import RansacParams, RansacResult, efficient_ransac
 from hollowtree.primitives.shapes import (
     DEFAULT_KINDS,
@@ -18,7 +19,6 @@ from hollowtree.primitives.shapes import (
     fit_primitive,
     surface_coordinates,
 )
-from hollowtree.tiling.errors import ConfigError
 
 PARAMS = RansacParams().to_dict()
 
@@ -387,9 +387,9 @@ def test_fast_compatibility_matches_distances(kind):
 
 # ------------------------------------------------------------------ a scanned scene
 def test_scanned_minaret_scene():
+    from hollowtree.classes import ClassId
     from hollowtree.scenes.scanner import ScanParams, scan
     from hollowtree.scenes.sites import build_scene
-    from hollowtree.tiling.classes import ClassId
 
     chunks = list(scan(build_scene("minaret"), ScanParams(step_deg=0.3, n_stations=2, seed=1)))
     xyz = np.concatenate([c.xyz for c in chunks])

@@ -11,7 +11,7 @@ import numpy as np
 import plyfile
 import pytest
 
-from hollowtree.tiling.errors import (
+from hollowtree.errors import (
     ConfigError,
     CorruptInputError,
     InputFileError,

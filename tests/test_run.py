@@ -17,10 +17,10 @@ import laspy
 import numpy as np
 import pytest
 
+from hollowtree.classes import ClassId
 from hollowtree.pipeline.coarse import COARSE_ALGORITHM
 from hollowtree.pipeline.export import LAS_CLASSIFICATION
 from hollowtree.pipeline.labels import LABEL_DTYPES
-from hollowtree.tiling.classes import ClassId
 from hollowtree.tiling.lock import StoreLock
 from hollowtree.tiling.store import RunStore
 
@@ -358,7 +358,7 @@ def _hold_memory(mb: int) -> float:
 
 
 def _fail(message: str) -> None:
-    from hollowtree.tiling.errors import ConfigError
+    from hollowtree.errors import ConfigError
 
     raise ConfigError(message)
 
@@ -372,8 +372,8 @@ def test_in_child_runs_each_task_in_a_child_of_its_worker_and_frees_its_memory()
     the worker): the worker gets the child's memory back, the child's result or exception
     comes back, and a child killed by a signal is a PipelineError that says so. Outside a
     worker process (the sync runner) the task runs in place."""
+    from hollowtree.errors import ConfigError, PipelineError
     from hollowtree.pipeline.graph import in_child, task_runner
-    from hollowtree.tiling.errors import ConfigError, PipelineError
 
     with task_runner("sync", progress=False) as run:
         assert run(in_child(_pids), [()], "pids") == [_pids()]
@@ -404,8 +404,8 @@ def test_in_child_task_over_the_worker_memory_limit_is_stopped():
 
     from distributed import Client, LocalCluster
 
+    from hollowtree.errors import PipelineError
     from hollowtree.pipeline.graph import in_child
-    from hollowtree.tiling.errors import PipelineError
 
     with LocalCluster(n_workers=1, threads_per_worker=1, memory_limit="700MB", dashboard_address=":0",
                       silence_logs=logging.ERROR) as cluster, Client(cluster) as client:

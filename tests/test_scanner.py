@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hollowtree.classes import ClassId
+from hollowtree.errors import ConfigError
 from hollowtree.scenes.scanner import ScanParams, range_sigma, scan
 from hollowtree.scenes.sites import build_scene
-from hollowtree.tiling.classes import ClassId
-from hollowtree.tiling.errors import ConfigError
 
 
 def test_noise_matches_setting(scan_of):

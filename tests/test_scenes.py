@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from embreex import mesh_construction, rtcore_scene
 
+from hollowtree.classes import ELEMENT_CLASSES, ClassId
 from hollowtree.scenes.elements import arcade, minaret, portal
 from hollowtree.scenes.mesh import TriMesh
 from hollowtree.scenes.shapes import (
@@ -27,7 +28,6 @@ from hollowtree.scenes.sites import (
     build_scene,
     scene_names,
 )
-from hollowtree.tiling.classes import ELEMENT_CLASSES, ClassId
 
 # Table 1 of the paper: arches, domes, minarets.
 TABLE1 = {

@@ -220,8 +220,8 @@ def test_energy_decision_is_still_the_papers(tmp_path):
 
 
 def test_storeyed_arcades_are_seeded_storeys_of_arch_bays():
+    from hollowtree.classes import ClassId
     from hollowtree.hollownet._scenes import storeyed_arcades
-    from hollowtree.tiling.classes import ClassId
 
     a = storeyed_arcades(np.random.default_rng([7, 100]))
     b = storeyed_arcades(np.random.default_rng([7, 100]))

@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from hollowtree.errors import ConfigError
 from hollowtree.primitives.stitch import StitchResult, UnionFind, csr_by_segment, stitch_segments
-from hollowtree.tiling.errors import ConfigError
 
 # -- UnionFind -----------------------------------------------------------------------------
 

@@ -10,10 +10,10 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
+from hollowtree.classes import ELEMENT_CLASSES, ClassId
 from hollowtree.pipeline.cli import main
 from hollowtree.scenes.sites import SITES
 from hollowtree.scenes.synth import SCALE, read_scan_metadata, sidecar_path
-from hollowtree.tiling.classes import ELEMENT_CLASSES, ClassId
 
 
 def test_version(capsys):

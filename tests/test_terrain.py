@@ -5,10 +5,10 @@ from __future__ import annotations
 import laspy
 import numpy as np
 
+from hollowtree.classes import ClassId
 from hollowtree.pipeline.run import run_workflow
 from hollowtree.pipeline.workflow import load_workflow
 from hollowtree.primitives.terrain import smrf_ground
-from hollowtree.tiling.classes import ClassId
 from hollowtree.tiling.store import RunStore
 
 

@@ -12,8 +12,8 @@ import laspy
 import numpy as np
 import pytest
 
+from hollowtree.errors import ConfigError
 from hollowtree.hollownet.dataset import labelled_samples
-from hollowtree.tiling.errors import ConfigError
 
 pytestmark = pytest.mark.slow
 

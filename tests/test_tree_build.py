@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
+from hollowtree.classes import NUM_CLASSES, ClassId
 from hollowtree.scenes.scanner import ScanParams, scan
 from hollowtree.scenes.sites import build_scene
-from hollowtree.tiling.classes import NUM_CLASSES, ClassId
 from hollowtree.tree import build_tree, load_energy_model
 from hollowtree.tree.fit import minaret_stage_cuts, proposal_target
 
@@ -483,9 +483,9 @@ def test_the_tree_stage_passes_look_ahead_from_the_workflow(monkeypatch):
     from pathlib import Path
 
     import hollowtree.tree.build as tb
+    from hollowtree.errors import ConfigError
     from hollowtree.pipeline.tree_stage import TreeStageParams, _group_tree
     from hollowtree.pipeline.workflow import load_workflow
-    from hollowtree.tiling.errors import ConfigError
 
     local = Path(__file__).resolve().parent.parent / "workflows" / "local.yaml"
     assert TreeStageParams.from_workflow(load_workflow(local).tree).look_ahead is True

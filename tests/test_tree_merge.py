@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hollowtree.tiling.classes import ClassId
+from hollowtree.classes import ClassId
 from hollowtree.tree.merge import merge_instances
 
 A, D = int(ClassId.ARCH), int(ClassId.DOME)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hollowtree.tiling.classes import ClassId
+from hollowtree.classes import ClassId
 from hollowtree.tree.rows import ArcadeCells, apply_cells, arcade_cells, instance_sample
 
 PITCH = 3.6

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hollowtree.classes import ClassId
+from hollowtree.errors import ConfigError
 from hollowtree.pipeline.tree_stage import TreeStageParams
-from hollowtree.tiling.classes import ClassId
-from hollowtree.tiling.errors import ConfigError
 from hollowtree.tree.build import build_tree
 from hollowtree.tree.tall import TallPillars, tall_pillars
 

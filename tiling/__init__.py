@@ -1,28 +1,8 @@
-"""Ground floor of hollowtree: the class vocabulary and the error types.
+"""The store floor: the tile grid, the readers (LAS/LAZ/COPC, PLY, E57), the Zarr run store,
+its lock and the ingest that tiles a scan into it.
 
-The run store, readers and ingest (issue 3) are not built yet; this package holds only
-what every other floor imports.
+The vocabulary every floor shares (classes, errors, column helpers) is one floor below,
+in ``hollowtree.classes``, ``hollowtree.errors`` and ``hollowtree.columns``.
 """
 
-from hollowtree.tiling.classes import (
-    CLASS_NAMES,
-    ELEMENT_CLASSES,
-    NUM_CLASSES,
-    PLANAR_CLASSES,
-    ClassId,
-    class_id,
-)
-from hollowtree.tiling.errors import ConfigError, InputFileError, OutputExistsError, PipelineError
-
-__all__ = [
-    "CLASS_NAMES",
-    "ELEMENT_CLASSES",
-    "NUM_CLASSES",
-    "PLANAR_CLASSES",
-    "ClassId",
-    "class_id",
-    "ConfigError",
-    "InputFileError",
-    "OutputExistsError",
-    "PipelineError",
-]
+__all__: list[str] = []

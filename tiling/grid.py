@@ -18,7 +18,7 @@ tile never depends on which method asked.
   routes every point to its core tile only. The core tile is always among a point's
   routed tiles (this only matters on the grid's top/right edge when ``buffer=0``).
 * **Points outside the grid** (or with non-finite coordinates) raise
-  :class:`~tiling.errors.ConfigError` by default; ``outside="flag"`` returns tile
+  :class:`~hollowtree.errors.ConfigError` by default; ``outside="flag"`` returns tile
   ``-1`` from :meth:`TileGrid.core_tile` and leaves them out of :meth:`TileGrid.route`.
 * Tile ids are row-major with x fastest: ``tile = iy * nx + ix``.
 
@@ -41,7 +41,7 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from hollowtree.tiling.errors import ConfigError
+from hollowtree.errors import ConfigError
 
 __all__ = ["TileGrid", "morton_order"]
 
@@ -89,7 +89,7 @@ class TileGrid:
     >>> TileGrid(origin=(0.0, 0.0), tile_size=-3, buffer=0.0, shape=(1, 1))
     Traceback (most recent call last):
     ...
-    hollowtree.tiling.errors.ConfigError: The 'tile_size' parameter of TileGrid must be > 0; got -3.
+    hollowtree.errors.ConfigError: The 'tile_size' parameter of TileGrid must be > 0; got -3.
     """
 
     origin: tuple[float, float]

@@ -30,8 +30,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from hollowtree.tiling.columns import column_max, column_min
-from hollowtree.tiling.errors import ConfigError, CorruptInputError
+from hollowtree.columns import column_max, column_min
+from hollowtree.errors import ConfigError, CorruptInputError
 from hollowtree.tiling.grid import TileGrid
 from hollowtree.tiling.kernels import morton_index_order, quantise, route_groups, split_rows
 from hollowtree.tiling.readers import (

@@ -27,7 +27,7 @@ from typing import Any
 import fsspec
 from fsspec.implementations.local import LocalFileSystem
 
-from hollowtree.tiling.errors import PipelineError
+from hollowtree.errors import PipelineError
 
 __all__ = ["StoreBusyError", "StoreLock", "HEARTBEAT_S", "STALE_S"]
 

@@ -25,9 +25,9 @@ Conventions
   standard ``classification`` and ``point_source_id``; every other PLY vertex property
   (``nx``, ``gt_class``, ...); ``scan_index`` for E57; other PDAL dimensions.
 
-Errors are one line and name the file: :class:`~tiling.errors.InputFileError` (missing),
-:class:`~tiling.errors.UnsupportedInputError` (unknown suffix, optional reader not
-installed) and :class:`~tiling.errors.CorruptInputError` (empty, truncated, corrupt).
+Errors are one line and name the file: :class:`~hollowtree.errors.InputFileError` (missing),
+:class:`~hollowtree.errors.UnsupportedInputError` (unknown suffix, optional reader not
+installed) and :class:`~hollowtree.errors.CorruptInputError` (empty, truncated, corrupt).
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ import numpy as np
 import numpy.typing as npt
 import plyfile
 
-from hollowtree.tiling.errors import (
+from hollowtree.errors import (
     ConfigError,
     CorruptInputError,
     InputFileError,

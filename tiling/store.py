@@ -36,7 +36,7 @@ from zarr.core.buffer import default_buffer_prototype
 from zarr.core.sync import sync
 from zarr.storage import MemoryStore, StorePath
 
-from hollowtree.tiling.errors import ConfigError, InputFileError, PipelineError
+from hollowtree.errors import ConfigError, InputFileError, PipelineError
 
 __all__ = ["SCHEMA_VERSION", "CHUNK_POINTS", "RunStore", "StoreError", "check_writable"]
 

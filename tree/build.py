@@ -24,8 +24,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
-from hollowtree.tiling.classes import ELEMENT_CLASSES, ClassId
-from hollowtree.tiling.columns import column_max, column_min, column_span
+from hollowtree.classes import ELEMENT_CLASSES, ClassId
+from hollowtree.columns import column_max, column_min, column_span
 from hollowtree.tree.energy import Classifier, EnergyModel, energy_terms, load_energy_model
 from hollowtree.tree.operators import RngLike, h
 from hollowtree.tree.sequences import (

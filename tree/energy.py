@@ -26,7 +26,7 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
-from hollowtree.tiling.classes import NUM_CLASSES
+from hollowtree.classes import NUM_CLASSES
 
 __all__ = [
     "DEFAULT_MODEL_PATH",
@@ -162,7 +162,7 @@ class EnergyModel:
     weights : tuple of 5 floats
         ``w`` of ``xi = w . e``.
     prior : tuple of K tuples of 3 floats
-        ``W[class, sequence - 1]``, K = :data:`~tiling.classes.NUM_CLASSES`.
+        ``W[class, sequence - 1]``, K = :data:`~hollowtree.classes.NUM_CLASSES`.
     n_min : int
         ``Nmin`` of ``e2``.
     threshold : float

@@ -35,9 +35,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from hollowtree.classes import NUM_CLASSES, ClassId
 from hollowtree.scenes.scanner import ScanParams, scan
 from hollowtree.scenes.sites import build_scene
-from hollowtree.tiling.classes import NUM_CLASSES, ClassId
 from hollowtree.tree.energy import Classifier, EnergyModel, energy_terms
 from hollowtree.tree.sequences import SequenceParams, propose
 

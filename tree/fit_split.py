@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from hollowtree.tiling.columns import column_span
+from hollowtree.columns import column_span
 from hollowtree.tree.build import _is_flat
 from hollowtree.tree.energy import Classifier
 from hollowtree.tree.sequences import SequenceParams, propose

@@ -53,7 +53,7 @@ from collections.abc import Mapping
 import numpy as np
 import numpy.typing as npt
 
-from hollowtree.tiling.columns import column_max, column_min
+from hollowtree.columns import column_max, column_min
 from hollowtree.tree.rows import ArcadeCells, _bay, _wpct
 
 __all__ = ["frame_cells", "FACE_DEPTH", "FACE_WIDE", "PIECE_DEPTH", "JAMB_SHARE", "GAP"]

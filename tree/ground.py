@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from hollowtree.tiling.classes import ClassId
+from hollowtree.classes import ClassId
 
 __all__ = ["ground_levels", "ground_or_roof"]
 

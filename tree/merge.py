@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from hollowtree.tiling.classes import ClassId
+from hollowtree.classes import ClassId
 
 __all__ = ["MERGE_CLASSES", "MERGE_INTO", "MERGE_INTO_OVERLAP", "MERGE_MIN_OVERLAP", "MERGE_PAD", "MERGE_STACKED", "merge_instances",
            "merged_classes"]

@@ -28,8 +28,8 @@ import numpy.typing as npt
 from scipy.ndimage import gaussian_filter1d
 from scipy.signal import find_peaks
 
+from hollowtree.columns import column_span
 from hollowtree.primitives.shapes import FailedFit
-from hollowtree.tiling.columns import column_span
 
 __all__ = [
     "Histogram",

@@ -57,7 +57,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from hollowtree.tiling.classes import ClassId
+from hollowtree.classes import ClassId
 
 __all__ = ["ROW_TAKE", "FULL_TAKE", "ArcadeCells", "arcade_cells", "apply_cells", "instance_sample", "SAMPLE_POINTS"]
 

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from hollowtree.tiling.classes import CLASS_NAMES, ELEMENT_CLASSES, NUM_CLASSES
+from hollowtree.classes import CLASS_NAMES, ELEMENT_CLASSES, NUM_CLASSES
 
 __all__ = ["DEFAULT_SPLIT_PATH", "FEATURE_NAMES", "N_PROBS", "SplitModel", "load_split_model", "split_features"]
 

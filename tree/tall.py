@@ -50,8 +50,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from hollowtree.tiling.classes import ClassId
-from hollowtree.tiling.columns import column_span
+from hollowtree.classes import ClassId
+from hollowtree.columns import column_span
 
 __all__ = ["DOME_MAX_SLENDERNESS", "MIN_FOOTPRINT_RATIO", "NotClutter", "TallPillars", "footprint_ratio",
            "not_clutter", "short_minarets", "size_rules", "slender_domes", "tall_pillars"]

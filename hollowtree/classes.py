@@ -1,8 +1,8 @@
 """The class vocabulary of hollowtree: the one place where ids and names are defined.
 
 Every module that needs a class id or name imports it from here (``../shared/METHOD.md``,
-"Classes"). It sits on the ground floor (``tiling/``) so that every package above can
-import it without an upward arrow.
+"Classes"). It sits on the ground floor (``hollowtree/`` itself, below ``tiling/``) so
+that every package can import it without an upward arrow.
 
 Examples
 --------

@@ -9,7 +9,7 @@ Minimum and maximum are exact, so the values are those of the axis-0 reductions 
 propagates alike, an empty array raises alike); only the sign of a zero extreme may
 differ where ``-0.0`` and ``0.0`` tie.
 
-Pure NumPy, low enough that every package imports it (``tiling/`` is the ground floor).
+Pure NumPy, on the ground floor (``hollowtree/`` itself): every package may import it.
 """
 
 from __future__ import annotations
