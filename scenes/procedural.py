@@ -360,28 +360,39 @@ def _fort(s: _Site) -> None:
     t = s.u(1.5, 4.0)
     corners = [(-w / 2, -d / 2), (w / 2, -d / 2), (w / 2, d / 2), (-w / 2, d / 2)]
     gate_side = s.i(0, 3)
+    # Bastions: round or polygonal drums at the corners and along the curtain walls, a
+    # bastion every 15-45 m (none at all along the walls in a quarter of the forts).
+    sides = s.pick((64, 64, 8, 12, 16))
+    spacing = s.u(15.0, 45.0) if s.rng.random() < 0.75 else float("inf")
+    r_lo, r_hi = s.pick(((3.0, 5.0), (3.0, 8.0), (5.0, 9.0)))
+    towers: list[tuple[float, float]] = list(corners)
     for k in range(4):
         (ax, ay), (bx, by) = corners[k], corners[(k + 1) % 4]
         path = StraightPath(x0=ax, y0=ay, x1=bx, y1=by)
+        tx, ty = (bx - ax) / path.length, (by - ay) / path.length
+        free = [(0.0, path.length)]
         if k == gate_side:
             g = s.u(4.0, 8.0)
             u0 = 0.5 * (path.length - g) - 1.0
             _gateway(s, path, u0, g, h + s.u(1.0, 6.0), "gateway", t)
-            tx, ty = (bx - ax) / path.length, (by - ay) / path.length
-            for j, (a, b) in enumerate(((0.0, u0), (u0 + g + 3.2, path.length))):
+            free = [(0.0, u0), (u0 + g + 3.2, path.length)]
+            for j, (a, b) in enumerate(free):
                 if b - a > 2.0:
                     s.add(wall(StraightPath(x0=ax + a * tx, y0=ay + a * ty, x1=ax + b * tx, y1=ay + b * ty),
                                height=h, thickness=t), ClassId.WALL, f"curtain wall {k + 1}.{j + 1}")
         else:
             s.add(wall(path, height=h, thickness=t), ClassId.WALL, f"curtain wall {k + 1}")
-    extra = s.i(0, 2)
-    for k, (x, y) in enumerate(corners):
-        s.add(bastion(center=(x, y, 0.0), radius=s.u(3.0, 8.0), height=h + s.u(1.0, 8.0), batter=s.u(0.0, 0.15)),
+        n = int(path.length // spacing) if np.isfinite(spacing) else 0
+        for j in range(1, n + 1):  # evenly along the wall, clear of the corners and the gateway
+            u = j * path.length / (n + 1)
+            if any(a + r_hi + 2.0 <= u <= b - r_hi - 2.0 for a, b in free):
+                towers.append((ax + u * tx, ay + u * ty))
+    for k, (x, y) in enumerate(towers):
+        corner = k < 4
+        s.add(bastion(center=(x, y, 0.0), radius=s.u(r_lo, r_hi) * (1.0 if corner else s.u(0.7, 1.0)),
+                      height=h + s.u(1.0, 8.0) if corner else h + s.u(0.5, 5.0), batter=s.u(0.0, 0.15),
+                      n_segments=sides),
               ClassId.MINARET, f"bastion {k + 1}")
-    for k in range(extra):  # mid-wall bastions
-        x, y = (0.0, -d / 2) if k == 0 else (w / 2, 0.0)
-        s.add(bastion(center=(x, y, 0.0), radius=s.u(3.0, 6.0), height=h + s.u(0.5, 5.0)), ClassId.MINARET,
-              f"bastion {5 + k}")
     if s.rng.random() < 0.5:
         _pavilion(s, s.u(-w / 4, w / 4), s.u(-d / 4, d / 4), "inner pavilion")
 
