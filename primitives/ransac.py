@@ -118,7 +118,7 @@ MAX_POOL = 4096  # candidates kept between batches (the best by upper bound)
 LEVEL_MIX = 0.9  # x of §4.3.1
 # Scoring blocks are sized to stay in a core's L2 cache: a block's float64 temporaries
 # (candidates x points) are 512 KB each. Blocks of 2 M elements were memory-bound and
-# 2.5-3x slower (docs/benchmarks.md, "Coarse segmentation", 2026-11-25).
+# 2.5-3x slower.
 CHUNK_ELEMENTS = 1 << 16  # candidate x point elements per scoring block
 MIN_BLOCK_CANDIDATES = 32  # candidates per block at least (keeps the matrix products efficient)
 POINT_CHUNK = 1 << 14  # points per block when one candidate meets all live points
