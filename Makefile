@@ -25,7 +25,7 @@ demo: $(STAMP)
 	$(VENV)/bin/hollowtree run workflows/local.yaml
 
 # Two pytest workers, one per core, each taking whole files (a file's module fixtures are
-# built once): 604 s against 820 s one after another on the slow machine of 2026-11-27.
+# built once): 604 s against 820 s one after another, measured side by side.
 test: $(STAMP)
 	$(PY) -m pytest -q -n 2 --dist loadfile
 

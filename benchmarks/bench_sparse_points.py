@@ -3,8 +3,8 @@ plain query it replaced, side by side in one run.
 
 Both find the rows of a mask whose 8th nearest neighbour among all points lies at least
 ``factor x spacing`` away, and the median of those distances. The reference builds a
-balanced k-d tree and queries every masked row without a bound on one thread (the code
-before 2026-11-25); ``sparse_points`` builds a sliding-midpoint tree, stops each query at
+balanced k-d tree and queries every masked row without a bound on one thread (the earlier
+code); ``sparse_points`` builds a sliding-midpoint tree, stops each query at
 the bound (dense rows end early) on every core, and queries the exact distance again
 only for the sparse rows. The answers must be equal (the script checks it); the ratio
 of the median times is the figure.
@@ -36,7 +36,7 @@ if str(REPO) not in sys.path:
 
 def reference(xyz: np.ndarray, mask: np.ndarray, spacing: float, factor: float, k: int = 8
               ) -> tuple[np.ndarray, float]:
-    """The query before 2026-11-25: every masked row, unbounded, one thread."""
+    """The earlier query: every masked row, unbounded, one thread."""
     from scipy.spatial import cKDTree
 
     rows = np.flatnonzero(mask)

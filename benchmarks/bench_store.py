@@ -1,6 +1,6 @@
 """Requests and time to write a run store's units on an object store (a local moto S3
 server) and in a local folder, side by side in one run: Zarr's own ``create_array`` (what ``RunStore`` called
-before 2026-11-27) against ``RunStore.write_unit`` (one metadata object per array).
+before its own writer) against ``RunStore.write_unit`` (one metadata object per array).
 
 Each unit is a labels part, ``labels/parts/<tile>/<part>``: eight arrays of ``--rows``
 rows, the same for both ways. The requests are those the server answered (one line of its

@@ -511,7 +511,7 @@ def plan_blocks(url: str, tile: int, cfg: dict[str, Any]) -> int:
     # _tile_points, to the bit) and write each block's input as it is made: the task
     # holds the stored coordinates (12 bytes a row) and about 17 bytes a row more during
     # the split, not a float copy of the tile (the 7.9 M rows of the 100 M-point
-    # benchmark's densest tile cost about 40 bytes a row before 2026-11-27).
+    # benchmark's densest tile cost about 40 bytes a row with a float copy).
     n_blocks, inputs = _block_inputs(raw, params.block_points, _margin(store, cfg, params), scale[:2])
     n_context = 0
     for b, (rows, mine) in enumerate(inputs):
