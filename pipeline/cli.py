@@ -92,6 +92,52 @@ def _non_negative(text: str) -> float:
     return value
 
 
+def _stage_flag(parser: argparse.ArgumentParser, section: Any, key: str, *names: str, **kwargs: Any) -> None:
+    """A flag for the workflow key ``key`` of ``section`` (``pipeline.workflow``): its help
+    and its default are the section's (one declaration); not given = the section's default."""
+    field = section.model_fields[key]
+    text = (field.description or "").replace("%", "%%")
+    if field.default is not None and not isinstance(field.default, (bool, list)):
+        d = field.default
+        text += f" (default {d:,})" if isinstance(d, int) else f" (default {d:g})" if isinstance(d, float) else f" (default {d})"
+    parser.add_argument(*names, dest=key, default=None, help=text, **kwargs)
+
+
+def _set_flag(parser: argparse.ArgumentParser, stage: str) -> None:
+    parser.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
+                        help=f"any key of the workflow's {stage} section (docs/workflows.md), the value read as "
+                             f"YAML; repeatable")
+
+
+def _section(section: Any, args: argparse.Namespace, stage: str, extra: dict[str, Any] | None = None) -> Any:
+    """The workflow section ``section`` from the flags given and ``--set KEY=VALUE``,
+    validated by the section itself (one line, exit 2, when a value is wrong)."""
+    import yaml
+    from pydantic import ValidationError
+
+    from hollowtree.errors import ConfigError
+
+    values = {k: getattr(args, k) for k in section.model_fields if getattr(args, k, None) is not None}
+    values.update(extra or {})
+    for item in args.sets:
+        key, sep, text = item.partition("=")
+        key = key.strip().removeprefix(f"{stage}.")
+        if not sep or key not in section.model_fields:
+            raise ConfigError(f"--set {item}: expected KEY=VALUE with KEY a key of the workflow's {stage} section "
+                              f"({', '.join(section.model_fields)})")
+        try:
+            values[key] = yaml.safe_load(text)
+        except yaml.YAMLError:
+            raise ConfigError(f"--set {item}: the value is not YAML") from None
+    try:
+        return section(**values)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        where = ".".join(str(x) for x in err["loc"])
+        got = f" (got {err['input']!r})" if "input" in err and not isinstance(err["input"], dict) else ""
+        raise ConfigError(f"{stage}.{where}: {err['msg']}{got}") from None
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``hollowtree`` and its subcommands."""
     parser = _Parser(
@@ -140,17 +186,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     g.add_argument("inputs", nargs="+", type=Path, help="input files (one registered site)")
     g.add_argument("--store", required=True, help="run store: a folder path or an fsspec URL")
-    g.add_argument("--tile-size", type=_tile_size, default=None,
-                   help="tile core side, metres, or 'auto' (default: about 2 M points per tile)")
-    g.add_argument("--buffer", type=_float, default=2.0, help="buffer width, metres (default 2)")
-    g.add_argument("--voxel", type=_float, help="keep one point per voxel of this size, metres")
-    g.add_argument("--bbox", type=_bbox, help="only tiles meeting XMIN,YMIN,XMAX,YMAX")
-    g.add_argument("--tiles", type=_int_list, help="only these tile ids, e.g. 0,1,5")
-    g.add_argument("--units", default=None, metavar="UNIT",
-                   help="metres per coordinate unit of the inputs (e.g. 0.3048) or a unit's name (m, ft, us-ft); "
-                        "default: the linear unit of their CRS, metres where they have none")
-    g.add_argument("--chunk-size", type=_positive_int, default=1_000_000,
-                   help="records per map task (default 1,000,000)")
+    from hollowtree.pipeline.workflow import CoarseSection, IngestSection, TreeSection
+
+    _stage_flag(g, IngestSection, "tile_size", "--tile-size", type=_tile_size)
+    _stage_flag(g, IngestSection, "buffer", "--buffer", type=_float)
+    _stage_flag(g, IngestSection, "voxel", "--voxel", type=_float)
+    _stage_flag(g, IngestSection, "bbox", "--bbox", type=_bbox, metavar="XMIN,YMIN,XMAX,YMAX")
+    _stage_flag(g, IngestSection, "tiles", "--tiles", type=_int_list, metavar="ID,ID,...")
+    _stage_flag(g, IngestSection, "units", "--units", type=_units, metavar="UNIT")
+    _stage_flag(g, IngestSection, "chunk_size", "--chunk-size", type=_positive_int)
+    _set_flag(g, "ingest")
     g.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process; "
                    "default: a local cluster of worker threads in this process")
     g.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
@@ -170,30 +215,21 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     c.add_argument("store", help="run store made by `hollowtree ingest`")
-    c.add_argument("--epsilon", type=_float, default=0.03, help="RANSAC distance, metres (default 0.03)")
-    c.add_argument("--alpha", type=_float, default=20.0, help="RANSAC normal angle, degrees (default 20)")
-    c.add_argument("--cluster-epsilon", type=_float,
-                   help="RANSAC bitmap cell, metres (default: max(0.15, 2/3 x the automatic eps))")
-    c.add_argument("--min-support", type=_positive_int, default=1000,
-                   help="smallest primitive, points (default 1000)")
-    c.add_argument("--eps", type=_float, help="DBSCAN radius, metres (default: 9 x the scan's 25 %% 8-NN spacing)")
-    c.add_argument("--min-samples", type=_positive_int, default=10, help="DBSCAN core threshold")
+    _stage_flag(c, CoarseSection, "epsilon", "--epsilon", type=_float)
+    _stage_flag(c, CoarseSection, "alpha", "--alpha", type=_float)
+    _stage_flag(c, CoarseSection, "cluster_epsilon", "--cluster-epsilon", type=_float)
+    _stage_flag(c, CoarseSection, "min_support", "--min-support", type=_positive_int)
+    _stage_flag(c, CoarseSection, "eps", "--eps", type=_float)
+    _stage_flag(c, CoarseSection, "min_samples", "--min-samples", type=_positive_int)
     c.add_argument("--no-free-segments", action="store_true",
                    help="leave points that no primitive explains unsegmented (default: DBSCAN them too)")
-    c.add_argument("--free-min-points", type=_positive_int, default=200,
-                   help="smallest free segment, points (default 200)")
-    c.add_argument("--block-points", type=_nonnegative_int, default=2_200_000,
-                   help="segment tiles with more points in x-y blocks of at most this many, each a "
-                        "task, joined like tiles (default 3,000,000; 0 = never)")
-    c.add_argument("--block-margin", type=_float, default=None,
-                   help="context around a block, metres (default: min(buffer, 2 x eps))")
-    c.add_argument("--sparse-factor", type=_non_negative, default=2.0,
-                   help="segment the unsegmented points at least this many times sparser than the scan once "
-                        "more, every distance x (2 x this) (default 2; 0 = one pass)")
-    c.add_argument("--group-gap", type=_non_negative, default=0.6,
-                   help="join touching segments (not large planes) within this many metres into element "
-                        "groups for the tree (default 0.6; 0 = off)")
-    c.add_argument("--seed", type=int, default=0)
+    _stage_flag(c, CoarseSection, "free_min_points", "--free-min-points", type=_positive_int)
+    _stage_flag(c, CoarseSection, "block_points", "--block-points", type=_nonnegative_int)
+    _stage_flag(c, CoarseSection, "block_margin", "--block-margin", type=_float)
+    _stage_flag(c, CoarseSection, "sparse_factor", "--sparse-factor", type=_non_negative)
+    _stage_flag(c, CoarseSection, "group_gap", "--group-gap", type=_non_negative)
+    _stage_flag(c, CoarseSection, "seed", "--seed", type=int)
+    _set_flag(c, "coarse")
     c.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process")
     c.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
     c.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -214,20 +250,15 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     tr.add_argument("store", help="run store after `hollowtree coarse`")
-    tr.add_argument("--max-depth", type=int, default=3, help="maximum depth d (default 3)")
-    tr.add_argument("--decision", choices=["split-model", "energy"], default="split-model",
-                    help="keep a node's best proposal by the learned split model (default) or the paper's energy xi")
-    tr.add_argument("--threshold", type=_float,
-                    help="keep a split when its score (split model probability, or xi) >= this (default: the model's own)")
-    tr.add_argument("--batch-points", type=_positive_int, default=1_000_000,
-                    help="points per task; small segments are batched (default 1,000,000)")
-    tr.add_argument("--max-group-points", type=_nonnegative_int, default=1_000_000,
-                    help="build the tree of a larger element group on a seeded sample of this many points; "
-                         "its points take their nearest sampled point's labels (default 1,000,000; 0 = never; else >= 1000)")
-    tr.add_argument("--weights", help="HollowNet weights (default: the shipped ones)")
-    tr.add_argument("--device", choices=["cpu", "cuda", "auto"], default="cpu",
-                   help="where HollowNet runs in each worker (default cpu; auto = CUDA where torch sees a GPU)")
-    tr.add_argument("--seed", type=int, default=0)
+    _stage_flag(tr, TreeSection, "max_depth", "--max-depth", type=int)
+    _stage_flag(tr, TreeSection, "decision", "--decision", choices=["split-model", "energy"])
+    _stage_flag(tr, TreeSection, "threshold", "--threshold", type=_float)
+    _stage_flag(tr, TreeSection, "batch_points", "--batch-points", type=_positive_int)
+    _stage_flag(tr, TreeSection, "max_group_points", "--max-group-points", type=_nonnegative_int)
+    _stage_flag(tr, TreeSection, "weights", "--weights")
+    _stage_flag(tr, TreeSection, "device", "--device", choices=["cpu", "cuda", "auto"])
+    _stage_flag(tr, TreeSection, "seed", "--seed", type=int)
+    _set_flag(tr, "tree")
     tr.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process")
     tr.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
     tr.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -366,14 +397,14 @@ def build_parser() -> argparse.ArgumentParser:
 def _cmd_tree(args: argparse.Namespace) -> int:
     from hollowtree.pipeline.graph import task_runner, timed_stage
     from hollowtree.pipeline.tree_stage import TreeStageParams, run_tree
+    from hollowtree.pipeline.workflow import TreeSection
     from hollowtree.tiling.store import RunStore
 
     RunStore.open(args.store)
-    params = TreeStageParams(max_depth=args.max_depth, decision=args.decision, threshold=args.threshold, batch_points=args.batch_points,
-                             weights=args.weights, seed=args.seed, max_group_points=args.max_group_points)
+    section = _section(TreeSection, args, "tree")
     with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
         with timed_stage(str(args.store), "tree", run):
-            report = run_tree(args.store, params, runner=run, device=args.device)
+            report = run_tree(args.store, TreeStageParams.from_workflow(section), runner=run, device=section.device)
     print(report.summary())
     return 0
 
@@ -594,20 +625,14 @@ def _cmd_export(args: argparse.Namespace) -> int:
 def _cmd_coarse(args: argparse.Namespace) -> int:
     from hollowtree.pipeline.coarse import CoarseParams, run_coarse
     from hollowtree.pipeline.graph import task_runner, timed_stage
-    from hollowtree.primitives.ransac import RansacParams
+    from hollowtree.pipeline.workflow import CoarseSection
     from hollowtree.tiling.store import RunStore
 
     RunStore.open(args.store)  # a missing store or another schema fails before any cluster starts
-    params = CoarseParams(
-        ransac=RansacParams(epsilon=args.epsilon, alpha_deg=args.alpha, min_support=args.min_support),
-        cluster_epsilon=args.cluster_epsilon, eps=args.eps, min_samples=args.min_samples, seed=args.seed,
-        free_segments=not args.no_free_segments, free_min_points=args.free_min_points,
-        block_points=args.block_points, block_margin=args.block_margin, sparse_factor=args.sparse_factor,
-        group_gap=args.group_gap,
-    )
+    section = _section(CoarseSection, args, "coarse", {"free_segments": False} if args.no_free_segments else None)
     with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
         with timed_stage(str(args.store), "coarse", run):
-            report = run_coarse(args.store, params, runner=run)
+            report = run_coarse(args.store, CoarseParams.from_workflow(section), runner=run)
     print(report.summary())
     return 0
 
@@ -636,12 +661,10 @@ def _cmd_ingest(args: argparse.Namespace) -> int:
 
     from hollowtree.errors import ConfigError
     from hollowtree.pipeline.graph import task_runner, timed_stage, tune_process_for_streaming
+    from hollowtree.pipeline.workflow import IngestSection
     from hollowtree.tiling.ingest import IngestParams, ingest
 
-    params = IngestParams(
-        tile_size=args.tile_size, buffer=args.buffer, voxel=args.voxel, bbox=args.bbox,
-        tiles=args.tiles, chunk_size=args.chunk_size, units=_units(args.units),
-    )
+    params = IngestParams.from_workflow(_section(IngestSection, args, "ingest"))
     try:
         in_process = args.scheduler == "sync" or (args.scheduler is None and not args.processes)
         if in_process:  # the tasks run in this process: before its worker threads exist

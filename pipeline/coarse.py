@@ -213,6 +213,20 @@ class CoarseParams:
         return d
 
     @classmethod
+    def from_workflow(cls, cp: Any) -> CoarseParams:
+        """From a workflow's ``coarse`` section (``pipeline.workflow.CoarseSection``), which
+        declares every key's default and constraints."""
+        return cls(
+            k=cp.k, ransac=RansacParams(epsilon=cp.epsilon, alpha_deg=cp.alpha, min_support=cp.min_support,
+                                        probability=cp.probability, shapes=tuple(cp.shapes)),
+            cluster_epsilon=cp.cluster_epsilon, eps=cp.eps, min_samples=cp.min_samples, seed=cp.seed,
+            free_segments=cp.free_segments, free_min_points=cp.free_min_points, block_points=cp.block_points,
+            block_margin=cp.block_margin, sparse_factor=cp.sparse_factor, group_gap=cp.group_gap,
+            group_min_contacts=cp.group_min_contacts, group_max_plane=cp.group_max_plane,
+            group_set_in=cp.group_set_in, group_stack=cp.group_stack,
+        )
+
+    @classmethod
     def from_dict(cls, data: dict[str, Any]) -> CoarseParams:
         d = dict(data)
         d.setdefault("block_points", 0)  # stores written before blocks existed: tiles whole

@@ -152,7 +152,6 @@ def run_workflow(
     from hollowtree.pipeline.coarse import CoarseParams, run_coarse
     from hollowtree.pipeline.graph import fresh_workers, task_runner
     from hollowtree.pipeline.labels import run_labels
-    from hollowtree.primitives.ransac import RansacParams
     from hollowtree.tiling.ingest import IngestParams, ingest
     from hollowtree.tiling.lock import StoreLock
     from hollowtree.tiling.store import RunStore, check_writable
@@ -173,21 +172,8 @@ def run_workflow(
         if not torch.cuda.is_available():
             raise ConfigError("tree.device is cuda but torch sees no CUDA device on this machine; use cpu or auto")
     new_params = _stage_params(wf)
-    ip = wf.ingest
-    ingest_params = IngestParams(
-        tile_size=ip.tile_size, tile_points=ip.tile_points, buffer=ip.buffer, voxel=ip.voxel,
-        bbox=ip.bbox, tiles=tuple(ip.tiles) if ip.tiles is not None else None, chunk_size=ip.chunk_size,
-        units=ip.units,
-    )
-    cp = wf.coarse
-    coarse_params = CoarseParams(
-        k=cp.k, ransac=RansacParams(epsilon=cp.epsilon, alpha_deg=cp.alpha, min_support=cp.min_support,
-                                    probability=cp.probability, shapes=tuple(cp.shapes)),
-        cluster_epsilon=cp.cluster_epsilon, eps=cp.eps, min_samples=cp.min_samples, seed=cp.seed,
-        free_segments=cp.free_segments, free_min_points=cp.free_min_points, block_points=cp.block_points,
-        block_margin=cp.block_margin, sparse_factor=cp.sparse_factor, group_gap=cp.group_gap, group_min_contacts=cp.group_min_contacts,
-        group_max_plane=cp.group_max_plane, group_set_in=cp.group_set_in, group_stack=cp.group_stack,
-    )
+    ingest_params = IngestParams.from_workflow(wf.ingest)
+    coarse_params = CoarseParams.from_workflow(wf.coarse)
     made = make_synthetic_input(wf, progress=progress)
     if made is not None:
         say(f"input: made synthetic scan {made}")

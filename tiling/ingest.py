@@ -166,6 +166,14 @@ class IngestParams:
         return d
 
     @classmethod
+    def from_workflow(cls, ip: Any) -> IngestParams:
+        """From a workflow's ``ingest`` section (``pipeline.workflow.IngestSection``), which
+        declares every key's default and constraints."""
+        return cls(tile_size=ip.tile_size, tile_points=ip.tile_points, buffer=ip.buffer, voxel=ip.voxel,
+                   bbox=tuple(ip.bbox) if ip.bbox is not None else None,
+                   tiles=tuple(ip.tiles) if ip.tiles is not None else None, chunk_size=ip.chunk_size, units=ip.units)
+
+    @classmethod
     def from_dict(cls, data: dict[str, Any]) -> IngestParams:
         d = dict(data)
         if d.get("bbox") is not None:
