@@ -159,13 +159,13 @@ def run_workflow(
     if client is None and (wf.cluster.jobqueue is not None or wf.cluster.kubernetes is not None):
         from hollowtree.pipeline.clusters import open_cluster
 
-        check_writable(wf.store)  # before any job is submitted
+        check_writable(wf.store, parents=True)  # before any job is submitted
         with open_cluster(wf.cluster) as cluster_client:
             return run_workflow(wf, progress=progress, say=say, client=cluster_client)
     t0 = time.perf_counter()
     url = wf.store
     report = RunReport(store=url)
-    check_writable(url)
+    check_writable(url, parents=True)
     if wf.tree.enabled and wf.tree.device == "cuda" and client is None and wf.cluster.scheduler in (None, "sync"):
         import torch  # the workers are this machine's: say so before anything runs
 
@@ -177,8 +177,12 @@ def run_workflow(
     made = make_synthetic_input(wf, progress=progress)
     if made is not None:
         say(f"input: made synthetic scan {made}")
-    made_dir = "://" not in url and not Path(url).exists()
+    made_dirs: list[Path] = []  # the folders this run makes for its store, innermost first
     if "://" not in url:  # the lock lives inside the store folder
+        folder = Path(url).absolute()
+        while not folder.exists():
+            made_dirs.append(folder)
+            folder = folder.parent
         Path(url).mkdir(parents=True, exist_ok=True)
     try:
         with StoreLock(url):
@@ -250,7 +254,7 @@ def run_workflow(
                 report.lines.append(line)
                 say(line)
     finally:
-        if made_dir:  # a run that wrote nothing (no scheduler, no input) leaves no folder behind
-            _remove_if_empty(Path(url))
+        for folder in made_dirs:  # a run that wrote nothing (no scheduler, no input) leaves no folder behind
+            _remove_if_empty(folder)
     report.seconds = time.perf_counter() - t0
     return report

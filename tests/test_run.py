@@ -446,10 +446,12 @@ def test_verbose_turns_on_our_own_loggers_only(tmp_path):
 
 
 def test_an_unreachable_scheduler_is_one_line_and_leaves_no_folder(scan, tmp_path):
-    store = tmp_path / "never.zarr"
+    """The run would make the store's missing folders (out/...), but leaves none of them
+    behind when it stops before writing anything."""
+    store = tmp_path / "out" / "runs" / "never.zarr"
     wf = _workflow(tmp_path, scan, str(store), extra=f"cluster: {{scheduler: 'tcp://127.0.0.1:{_free_port()}'}}\n")
     r = _cli("run", str(wf), "--no-progress")
     assert r.returncode == 2
     assert len(r.stderr.strip().splitlines()) == 1
     assert "cannot reach the Dask scheduler" in r.stderr
-    assert not store.exists()
+    assert not (tmp_path / "out").exists()

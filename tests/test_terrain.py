@@ -47,10 +47,10 @@ def test_a_sparse_scan_gets_its_ground_from_the_terrain_filter(tmp_path):
     las.x, las.y, las.z = xyz.T
     las.write(tmp_path / "als.las")
     wf = tmp_path / "wf.yaml"
-    wf.write_text(f"input: {{files: [{tmp_path / 'als.las'}]}}\nstore: {tmp_path / 's.zarr'}\n"
+    wf.write_text(f"input: {{files: [{tmp_path / 'als.las'}]}}\nstore: {tmp_path / 'runs' / 's.zarr'}\n"
                   "tree: {enabled: false}\ncluster: {scheduler: sync}\n")
     run_workflow(load_workflow(wf), progress=False, say=lambda _: None)
-    store = RunStore.open(tmp_path / "s.zarr")
+    store = RunStore.open(tmp_path / "runs" / "s.zarr")  # the run made its folder
     assert store.attrs["stages"]["coarse"]["spacing"] > 0.5
     cls = store.read_slice("labels/class")
     assert (cls[truth] == ClassId.GROUND).mean() > 0.97

@@ -584,9 +584,12 @@ class _UnitWriter:
                 self._create(name, np.asarray(values))
 
 
-def check_writable(url: str | Path) -> None:
+def check_writable(url: str | Path, *, parents: bool = False) -> None:
     """Raise :class:`StoreError` if a local store path cannot be created or written, or
-    an object store (fsspec URL) cannot be reached: one line, not the client's traceback."""
+    an object store (fsspec URL) cannot be reached: one line, not the client's traceback.
+
+    ``parents``: the store's missing parent folders will be made (``hollowtree run``: a
+    workflow's folders are the run's to make); the nearest existing one must be writable."""
     url = str(url)
     if _is_url(url):
         import fsspec
@@ -600,6 +603,9 @@ def check_writable(url: str | Path) -> None:
         return
     p = Path(url)
     parent = p.resolve().parent
+    if parents:
+        while not parent.exists() and parent != parent.parent:
+            parent = parent.parent
     if not parent.is_dir():
         raise StoreError(f"store {url}: folder {parent} does not exist")
     target = p if p.exists() else parent
