@@ -17,7 +17,6 @@ Store layout written here (``docs/store.md``)::
 
 from __future__ import annotations
 
-import hashlib
 import json
 import logging
 import math
@@ -48,6 +47,7 @@ from hollowtree.primitives.ransac import RansacParams, efficient_ransac
 from hollowtree.primitives.score import load_kernels
 from hollowtree.primitives.stitch import UnionFind
 from hollowtree.tiling.grid import TileGrid
+from hollowtree.tiling.stage import Stage, params_hash
 from hollowtree.tiling.store import CHUNK_POINTS, RunStore
 
 __all__ = ["CoarseParams", "PRIMITIVE_CODES", "coarse_tile", "run_coarse", "CoarseReport"]
@@ -1276,35 +1276,32 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     params = CoarseParams.from_dict({**params.to_dict(), "ransac": ransac.to_dict(),
                                      "cluster_epsilon": float(cluster_epsilon), "eps": float(eps)})
     cfg = {"params": params.to_dict(), "eps": float(eps), "algorithm": COARSE_ALGORITHM}
-    h = hashlib.sha256(json.dumps([cfg, attrs["ingest"]["params_hash"]], sort_keys=True).encode()).hexdigest()[:16]
+    h = params_hash([cfg, attrs["ingest"]["params_hash"]])
     cfg["params_hash"] = h
-    stages = attrs.get("stages", {})
-    if stages.get(STAGE, {}).get("params_hash") not in (None, h):
-        store.clear_records(STAGE)  # other parameters: every tile is redone
-        store.clear_records(BLOCK_STAGE)
-        store.clear_records(PLAN_STAGE)
-    done = {k for k, v in store.records(STAGE).items() if v.get("params_hash") == h}
+    stage = Stage(store, STAGE, h, unit_stages=(BLOCK_STAGE, PLAN_STAGE))
+    previous = stage.last
+    stage.clear_if_changed()  # other parameters: every tile is redone
+    done = set(stage.done())
     todo = [t for t in tiles if str(t) not in done]
     # Tiles above block_points are cut into blocks, each a task of its own, so that a
     # task's memory follows block_points rather than the densest tile; a second round
     # joins each such tile's blocks. Largest units first (the longest tasks start first).
     size = {t: int(done_ingest[str(t)].get("n_points", 0)) for t in todo}
     big = [t for t in todo if params.block_points and size[t] > params.block_points]
-    planned = {k: int(v["n_blocks"]) for k, v in store.records(PLAN_STAGE).items() if v.get("params_hash") == h}
+    planned = {k: int(v["n_blocks"]) for k, v in stage.done(PLAN_STAGE).items()}
     n_blocks = {t: planned[str(t)] for t in big if str(t) in planned}
     unplanned = sorted((t for t in big if t not in n_blocks), key=lambda t: -size[t])
     # Each task in a child process of its worker (in_child): a worker's heap would keep
     # what its earlier tasks left, and a later task peak 80-140 MB above the first.
     n_blocks.update(zip(unplanned, runner(in_child(plan_blocks), [(url, t, cfg) for t in unplanned],
                                           "coarse: blocks"), strict=True))
-    blocks_done = {k for k, v in store.records(BLOCK_STAGE).items() if v.get("params_hash") == h}
+    blocks_done = set(stage.done(BLOCK_STAGE))
     units = [(size[t], t, -1) for t in todo if t not in n_blocks]
     units += [(size[t] / n_blocks[t], t, b) for t in big for b in range(n_blocks[t]) if f"{t}.{b}" not in blocks_done]
     units.sort(key=lambda u: -u[0])
     runner(in_child(_coarse_unit, load_kernels), [(url, t, b, cfg) for _, t, b in units], "coarse: tiles")
     if big:
         runner(in_child(coarse_tile), [(url, t, cfg, n_blocks[t]) for t in big], "coarse: joins")
-    previous = stages.get(STAGE, {})
     t_stitch = time.perf_counter()
     if not todo and previous.get("params_hash") == h and "n_tile_segments" in previous:
         n_segments, n_keys = int(previous["n_segments"]), int(previous["n_tile_segments"])  # stitched before
@@ -1312,9 +1309,8 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
         n_segments, n_keys = _stitch(store, tiles, params)
     t_stitch = time.perf_counter() - t_stitch
     recs = store.records(STAGE)
-    store.update_attrs({"stages": {**store.attrs.get("stages", {}), STAGE: {
-        "params_hash": h, "units": len(tiles), "done": len(tiles), "eps": float(eps), "spacing": spacing,
-        "params": params.to_dict(), "n_segments": n_segments, "n_tile_segments": n_keys}}})
+    stage.finish(len(tiles), eps=float(eps), spacing=spacing, params=params.to_dict(), n_segments=n_segments,
+                 n_tile_segments=n_keys)
     return CoarseReport(
         store=url, n_tiles=len(tiles), tiles_run=len(todo), tiles_skipped=len(tiles) - len(todo),
         n_tile_segments=n_keys, n_segments=n_segments,

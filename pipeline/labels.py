@@ -33,8 +33,6 @@ points are class ground, instance 0, whatever the tree said.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import time
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -49,6 +47,7 @@ from hollowtree.pipeline.graph import in_child
 from hollowtree.pipeline.tree_stage import MERGE_CLASS_MAP, MERGE_MAP, ROWS
 from hollowtree.primitives.terrain import smrf_ground
 from hollowtree.tiling.grid import TileGrid
+from hollowtree.tiling.stage import Stage, params_hash
 from hollowtree.tiling.store import CHUNK_POINTS, RunStore
 from hollowtree.tree.rows import ArcadeCells, apply_cells
 
@@ -324,7 +323,7 @@ def labels_hash(attrs: dict[str, Any], *, use_tree: bool) -> str:
     upstream = stages.get("tree" if use_tree else "coarse", {}).get("params_hash")
     if upstream is None:
         raise PipelineError(f"the {'tree' if use_tree else 'coarse'} stage has not run on this store")
-    return hashlib.sha256(json.dumps(["labels-v3", upstream, use_tree, terrain(attrs)]).encode()).hexdigest()[:16]
+    return params_hash(["labels-v3", upstream, use_tree, terrain(attrs)])
 
 
 def terrain(attrs: dict[str, Any]) -> bool:
@@ -343,14 +342,13 @@ def run_labels(url: str, *, use_tree: bool, runner: Any) -> LabelsReport:
     n_points = int(sum(int(s["point_count"]) for s in attrs["sources"]))
     tiles = [int(t) for t in attrs["ingest"]["tiles"]]
     stages = attrs.get("stages", {})
-    if stages.get(STAGE, {}).get("params_hash") not in (None, h):
-        store.clear_records(TILE_STAGE)
-        store.clear_records(STAGE)
+    stage = Stage(store, STAGE, h, unit_stages=(TILE_STAGE,))
+    stage.clear_if_changed()
     cfg = {"params_hash": h, "n_points": n_points, "tree": stages.get("tree") if use_tree else None,
            "terrain": terrain(attrs)}
-    done_t = {k: v for k, v in store.records(TILE_STAGE).items() if v.get("params_hash") == h}
+    done_t = stage.done(TILE_STAGE)
     todo_t = [t for t in tiles if str(t) not in done_t]
-    done_r = {k for k, v in store.records(STAGE).items() if v.get("params_hash") == h}
+    done_r = set(stage.done())
     if not done_r:  # first time with these parameters: fresh, zero-filled arrays
         for k, dt in LABEL_DTYPES.items():
             store.create_array(f"labels/{k}", shape=(n_points,), dtype=dt)
@@ -367,8 +365,7 @@ def run_labels(url: str, *, use_tree: bool, runner: Any) -> LabelsReport:
     todo_r = [r for r in range(n_ranges) if str(r) not in done_r]
     runner(in_child(labels_range), [(url, r, parts.get(r, []), cfg) for r in todo_r], "labels: ranges")
     n_labelled = sum(int(done_t[str(t)]["n_points"]) for t in tiles)
-    store.update_attrs({"stages": {**store.attrs.get("stages", {}), STAGE: {
-        "params_hash": h, "units": n_ranges, "done": n_ranges, "tree": use_tree, "n_labelled": n_labelled}}})
+    stage.finish(n_ranges, tree=use_tree, n_labelled=n_labelled)
     return LabelsReport(store=url, n_points=n_points, n_labelled=n_labelled, tiles_run=len(todo_t),
                         tiles_skipped=len(tiles) - len(todo_t), ranges_run=len(todo_r),
                         ranges_skipped=n_ranges - len(todo_r), seconds=time.perf_counter() - t0)

@@ -28,8 +28,6 @@ Store layout written here (``docs/store.md``)::
 from __future__ import annotations
 
 import functools
-import hashlib
-import json
 import math
 import time
 from dataclasses import asdict, dataclass
@@ -43,6 +41,7 @@ from hollowtree.classes import PLANAR_CLASSES, ClassId
 from hollowtree.errors import ConfigError, PipelineError
 from hollowtree.pipeline.coarse import _read_table, _write_table
 from hollowtree.pipeline.graph import in_child
+from hollowtree.tiling.stage import Stage, params_hash
 from hollowtree.tiling.store import RunStore
 from hollowtree.tree.tall import short_minarets, size_rules, slender_domes
 
@@ -457,16 +456,16 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any, device: str = "c
     coarse = stages.get("coarse", {})
     if not coarse or coarse.get("done") != coarse.get("units"):
         raise PipelineError(f"store {url}: the coarse stage is not complete; run it first")
-    h = hashlib.sha256(json.dumps([params.to_dict(), coarse["params_hash"], TREE_ALGORITHM], sort_keys=True)
-                       .encode()).hexdigest()[:16]
+    h = params_hash([params.to_dict(), coarse["params_hash"], TREE_ALGORITHM])
     cfg = {"params": params.to_dict(), "params_hash": h, "device": device}
-    if stages.get(STAGE, {}).get("params_hash") not in (None, h):
-        store.clear_records(STAGE)
+    stage = Stage(store, STAGE, h)
+    completed = stage.last.get("params_hash") == h
+    stage.clear_if_changed()
     offsets = store.read_unit("coarse/csr", ["offsets"])["offsets"]
     # Batches of whole element groups (a group is a run of consecutive segments).
     starts = group_starts(store)
     batches = [(int(starts[g0]), int(starts[g1])) for g0, g1 in plan_batches(offsets[starts], params.batch_points)]
-    done = {k: v for k, v in store.records(STAGE).items() if v.get("params_hash") == h}
+    done = stage.done()
     todo = [b for b in range(len(batches)) if str(b) not in done]
     ground = _ground_levels(store) if todo and (params.roof_min_height is not None
                                                 or params.other_max_base is not None) else None
@@ -486,7 +485,7 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any, device: str = "c
         done[str(b)] = info
     infos = [done[str(b)] for b in range(len(batches))]
     inst_offsets = np.r_[0, np.cumsum([i["n_instances"] for i in infos])].astype(np.int64)
-    if todo or stages.get(STAGE, {}).get("params_hash") != h:
+    if todo or not completed:
         tables = []
         for b in range(len(batches)):
             t = _read_table(store, f"tree/tables/{b}.parquet")
@@ -511,9 +510,8 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any, device: str = "c
     n_merged = int(np.count_nonzero(store.read_slice(MERGE_MAP) != np.arange(int(inst_offsets[-1]) + 1))) \
         if store.has(MERGE_MAP) else 0
     n_nodes = sum(int(i["n_nodes"]) for i in infos)
-    store.update_attrs({"stages": {**store.attrs.get("stages", {}), STAGE: {
-        "params_hash": h, "units": len(batches), "done": len(batches), "params": params.to_dict(),
-        "batches": [i["csr"] for i in infos], "instance_offsets": inst_offsets[:-1].tolist()}}})
+    stage.finish(len(batches), params=params.to_dict(), batches=[i["csr"] for i in infos],
+                 instance_offsets=inst_offsets[:-1].tolist())
     return TreeReport(n_segments=len(offsets) - 1, n_groups=len(starts) - 1, n_batches=len(batches), batches_run=len(todo),
                       n_nodes=n_nodes, n_instances=int(inst_offsets[-1]) - n_merged, n_merged=n_merged,
                       seconds=time.perf_counter() - t0)

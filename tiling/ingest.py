@@ -17,8 +17,6 @@ set by ``chunk_size`` (map) and the largest tile (reduce), never by the scan.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-import json
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -42,6 +40,7 @@ from hollowtree.tiling.readers import (
     probe,
     read_blocks,
 )
+from hollowtree.tiling.stage import Stage, params_hash
 from hollowtree.tiling.store import RunStore, StoreError, check_writable
 
 __all__ = [
@@ -395,8 +394,7 @@ def plan_ingest(inputs: Sequence[str | Path], params: IngestParams) -> IngestPla
     identity["sources"] = [
         {"path": str(Path(s.path).resolve()), "size": s.size_bytes, "points": s.point_count} for s in sources
     ]
-    digest = hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()[:16]
-    return IngestPlan(**{**plan.__dict__, "params_hash": digest})
+    return IngestPlan(**{**plan.__dict__, "params_hash": params_hash(identity)})
 
 
 def _row_dtype(fields: dict[str, list[Any]], voxel: bool) -> np.dtype:
@@ -733,10 +731,10 @@ def ingest(
     store = open_for_ingest(url, plan, replace=replace)
     attrs = store.attrs
     h = plan.params_hash
+    stage = Stage(store, STAGE, h)  # another ingest was refused or replaced by open_for_ingest
 
-    done_maps = {k: v for k, v in store.records(MAP_STAGE).items()
-                 if v.get("params_hash") == h and v.get("fragment") == FRAGMENT_FORMAT}
-    done_tiles = {k for k, v in store.records(STAGE).items() if v.get("params_hash") == h}
+    done_maps = stage.done(MAP_STAGE, where=lambda v: v.get("fragment") == FRAGMENT_FORMAT)
+    done_tiles = set(stage.done())
     todo_units = [u for u in plan.units if str(u.map_id) not in done_maps]
     # Map units are needed only while some tile is not recorded yet.
     if len(done_tiles) == len(plan.tiles):
@@ -766,8 +764,7 @@ def ingest(
     recs = store.records(STAGE)
     n_core = sum(int(recs[str(t)]["n_core"]) for t in plan.tiles)
     n_all = sum(int(recs[str(t)]["n_points"]) for t in plan.tiles)
-    store.update_attrs({"stages": {**store.attrs.get("stages", {}), STAGE: {
-        "params_hash": h, "units": len(plan.tiles), "done": len(plan.tiles)}}})
+    stage.finish(len(plan.tiles))
     return IngestReport(
         store=url, n_tiles=len(plan.tiles), n_points_in=sum(s.point_count for s in plan.sources),
         n_core_points=n_core, n_buffer_points=n_all - n_core, n_dropped=n_dropped,
