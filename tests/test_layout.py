@@ -53,7 +53,7 @@ def _modules():
 
 
 def test_top_level_layout():
-    for name in ["pyproject.toml", "README.md", "hollowtree", "pipeline", "tiling", "tree", "hollownet",
+    for name in ["pyproject.toml", "README.md", "LICENSE", "CITATION.cff", "CHANGELOG.md", "hollowtree", "pipeline", "tiling", "tree", "hollownet",
                  "tests", "workflows", "docs", "benchmarks", ".ci/run"]:
         assert (REPO / name).exists(), name
 
