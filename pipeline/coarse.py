@@ -17,14 +17,12 @@ Store layout written here (``docs/store.md``)::
 
 from __future__ import annotations
 
-import json
 import logging
-import math
 import os
 import tempfile
 import time
-from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import asdict, dataclass, field, replace
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -33,18 +31,25 @@ import pyarrow.parquet as pq
 
 from hollowtree.errors import ConfigError, PipelineError
 from hollowtree.pipeline.graph import in_child
-from hollowtree.primitives.blocks import block_context, split_blocks
-from hollowtree.primitives.dbscan import dbscan_segments, sparse_points, window_spacing
+from hollowtree.primitives.dbscan import window_spacing
 from hollowtree.primitives.group import (
+    STRIP_FACTOR,
+    join_stacked,
     large_segments,
-    segment_contacts,
     segment_contacts_chunked,
-    set_in_plane,
-    stacked_pairs,
+    set_in_walls,
 )
-from hollowtree.primitives.normals import estimate_normals
-from hollowtree.primitives.ransac import RansacParams, efficient_ransac
+from hollowtree.primitives.ransac import RansacParams
 from hollowtree.primitives.score import load_kernels
+from hollowtree.primitives.segment import (
+    PRIMITIVE_CODES,
+    CoarseParams,
+    block_inputs,
+    join_blocks,
+    same_primitive,
+    segment_block,
+    segment_tile,
+)
 from hollowtree.primitives.stitch import UnionFind
 from hollowtree.tiling.grid import TileGrid
 from hollowtree.tiling.stage import Stage, params_hash
@@ -59,182 +64,6 @@ STAGE = "coarse"
 BLOCK_STAGE = "coarse.blocks"
 #: Records of the tiles cut into blocks (:func:`plan_blocks`; unit ``"<tile>"``).
 PLAN_STAGE = "coarse.plan"
-#: Primitive type codes stored per point (0 = no primitive).
-PRIMITIVE_CODES = {"plane": 1, "sphere": 2, "cylinder": 3, "cone": 4, "torus": 5}
-
-
-@dataclass(frozen=True, kw_only=True)
-class CoarseParams:
-    """Parameters of the coarse stage.
-
-    Parameters
-    ----------
-    k : int
-        Neighbours of the PCA normals.
-    ransac : RansacParams
-        Efficient RANSAC settings (epsilon, alpha, minimum support, ...); the stage's
-        default minimum support is 1000 points (small primitives cost most of the time
-        and the tree splits segments further anyway).
-    cluster_epsilon : float or None
-        RANSAC's bitmap cell; None = max(0.15 m, 2/3 of the automatic eps), computed
-        once per store, so sparse far surfaces are not shattered into bitmap islands.
-    eps : float or None
-        DBSCAN radius (metres); None = ``EPS_FACTOR`` (9) x the 25 % quantile of the
-        8-NN spacing over windows of the whole scan (:func:`scan_spacing`), computed once
-        for the whole store so every tile uses the same value.
-    min_samples : int
-        DBSCAN core threshold.
-    free_segments : bool
-        Also split the points that no primitive explains into DBSCAN clusters ("free"
-        segments, primitive code 0), so that small or sparsely scanned elements (a
-        minaret whose stages are each below the minimum support, a small dome) still reach
-        the tree and HollowNet. The paper leaves these points' fate open; without this
-        they stay unsegmented and unlabelled.
-    free_min_points : int
-        Free clusters smaller than this stay unsegmented (scanner noise, stray points).
-    seed : int
-        Base seed; tile t uses ``SeedSequence([seed, t])``.
-    angle_tol_deg, distance_tol, radius_tol : float
-        When two tiles' segments that share points are the same primitive: axes/normals
-        within ``angle_tol_deg``, positions within ``distance_tol`` metres, radii within
-        ``radius_tol`` (relative).
-    block_points : int
-        A tile with more points is segmented in x-y blocks of at most this many points
-        (each with a margin of context around it, each a task of its own), joined like
-        tiles, so that a task's memory follows this bound and not the densest spot of the
-        scan (a tile near a scanner station can hold several times the average). 0 =
-        never. Default 2.2 M, a little over the ingest's average tile (``tile_points``,
-        2 M), so that a tile of about the average stays whole (docs/method.md, "Blocks
-        inside a dense tile").
-    block_margin : float or None
-        Context around a block, metres; None = min(the tile buffer, 2 x the DBSCAN eps).
-        Dense blocks are small (a 1 M-point block near a station can be 3 x 4 m), so a
-        margin as wide as the tile buffer would multiply the points each block processes;
-        one eps was measured too narrow (the join missed, adjusted Rand index 0.70 against
-        whole tiles), two eps enough (0.9995).
-    sparse_factor : float
-        Sparse second pass (docs/method.md): the points the first pass leaves unsegmented
-        whose spacing (to their 8th-nearest neighbour among all points) is at least this many
-        times the scan's (eps / 3) are segmented once more (normals, RANSAC, DBSCAN) with
-        RANSAC's epsilon and cell and the DBSCAN eps multiplied by ``2 x sparse_factor``
-        and the minimum support divided by its square (at least ``free_min_points``);
-        each second-pass segment then joins the first-pass segments of the same primitive
-        it touches. 0 = one pass only.
-    group_gap : float
-        Element groups (docs/method.md): global segments whose points come within this
-        many metres of each other (:func:`primitives.group.segment_contacts`) and that
-        are not large planes are one element group, the unit the tree splits and
-        HollowNet classifies; 0 = every segment is its own group (the paper's reading).
-    group_min_contacts : int
-        Contacts (voxel representatives within ``group_gap``) two segments need.
-    group_max_plane : float
-        A plane whose horizontal extent (bounding-box diagonal in x-y) exceeds this many
-        metres (ground, roofs, facades) is never grouped with its neighbours, except as below;
-        nor is a free segment wider than ``STRIP_FACTOR`` (3) times this (a strip along a
-        facade; :func:`primitives.group.large_segments`).
-    group_set_in : float
-        A segment set in a large wall (it touches a near-vertical large plane, and its
-        bounding box lies within this many metres of the plane and inside the plane's box
-        grown by as much): the jambs and intrados of an arcade's arches in the arcade's
-        face. Such a segment joins that wall (of several, the one it has most contacts
-        with) and none of its other neighbours, so the tree cuts the face into bays with
-        their intrados, and two walls never join through it; 0 = never (coarse-v2).
-    group_stack : float
-        Element groups stacked one on another (the upper one starts at most this many
-        metres above the top of the lower one, their footprints overlap by 70 % of the
-        smaller one and their areas are within 3x; :func:`primitives.group.stacked_pairs`)
-        are one group: a minaret's stages, whose joints its balconies hide from every
-        station. Groups holding a large segment (plane or free strip) are never stacked.
-        0 = never (coarse-v2).
-    """
-
-    k: int = 16
-    ransac: RansacParams = field(default_factory=lambda: RansacParams(min_support=1000))
-    cluster_epsilon: float | None = None
-    eps: float | None = None
-    min_samples: int = 10
-    free_segments: bool = True
-    free_min_points: int = 200
-    seed: int = 0
-    angle_tol_deg: float = 10.0
-    distance_tol: float = 0.15
-    radius_tol: float = 0.15
-    block_points: int = 2_200_000
-    block_margin: float | None = None
-    sparse_factor: float = 2.0
-    group_gap: float = 0.6
-    group_min_contacts: int = 3
-    group_max_plane: float = 6.0
-    group_set_in: float = 1.5
-    group_stack: float = 1.0
-
-    def __post_init__(self) -> None:
-        if not (isinstance(self.sparse_factor, (int, float)) and math.isfinite(self.sparse_factor)
-                and (self.sparse_factor == 0 or self.sparse_factor >= 1)):
-            raise ConfigError(f"The 'sparse_factor' parameter of coarse must be 0 or a float in the range "
-                              f"[1.0, inf). Got {self.sparse_factor!r} instead.")
-        if not (isinstance(self.group_gap, (int, float)) and math.isfinite(self.group_gap) and self.group_gap >= 0):
-            raise ConfigError(f"The 'group_gap' parameter of coarse must be a float in the range [0.0, inf). "
-                              f"Got {self.group_gap!r} instead.")
-        if isinstance(self.group_min_contacts, bool) or not isinstance(self.group_min_contacts, int) \
-                or self.group_min_contacts < 1:
-            raise ConfigError(f"The 'group_min_contacts' parameter of coarse must be an int in the range [1, inf). "
-                              f"Got {self.group_min_contacts!r} instead.")
-        if not (isinstance(self.group_max_plane, (int, float)) and math.isfinite(self.group_max_plane)
-                and self.group_max_plane > 0):
-            raise ConfigError(f"The 'group_max_plane' parameter of coarse must be a float in the range (0.0, inf). "
-                              f"Got {self.group_max_plane!r} instead.")
-        if not (isinstance(self.group_set_in, (int, float)) and math.isfinite(self.group_set_in)
-                and self.group_set_in >= 0):
-            raise ConfigError(f"The 'group_set_in' parameter of coarse must be a float in the range [0.0, inf). "
-                              f"Got {self.group_set_in!r} instead.")
-        if not (isinstance(self.group_stack, (int, float)) and math.isfinite(self.group_stack)
-                and self.group_stack >= 0):
-            raise ConfigError(f"The 'group_stack' parameter of coarse must be a float in the range [0.0, inf). "
-                              f"Got {self.group_stack!r} instead.")
-        if self.block_margin is not None and not (math.isfinite(self.block_margin) and self.block_margin > 0):
-            raise ConfigError(f"The 'block_margin' parameter of coarse must be a float in the range (0.0, inf) "
-                              f"or None. Got {self.block_margin!r} instead.")
-        if isinstance(self.block_points, bool) or not isinstance(self.block_points, int) or self.block_points < 0:
-            raise ConfigError(f"The 'block_points' parameter of coarse must be an int in the range [0, inf). "
-                              f"Got {self.block_points!r} instead.")
-        if not (isinstance(self.k, int) and self.k >= 3):
-            raise ConfigError(f"The 'k' parameter of coarse must be an int in the range [3, inf). Got {self.k!r} instead.")
-        if self.eps is not None and not (math.isfinite(self.eps) and self.eps > 0):
-            raise ConfigError(f"The 'eps' parameter of coarse must be a float in the range (0.0, inf). Got {self.eps!r} instead.")
-        if not (isinstance(self.min_samples, int) and self.min_samples >= 1):
-            raise ConfigError(
-                f"The 'min_samples' parameter of coarse must be an int in the range [1, inf). Got {self.min_samples!r} instead."
-            )
-
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["ransac"] = self.ransac.to_dict()
-        return d
-
-    @classmethod
-    def from_workflow(cls, cp: Any) -> CoarseParams:
-        """From a workflow's ``coarse`` section (``pipeline.workflow.CoarseSection``), which
-        declares every key's default and constraints."""
-        return cls(
-            k=cp.k, ransac=RansacParams(epsilon=cp.epsilon, alpha_deg=cp.alpha, min_support=cp.min_support,
-                                        probability=cp.probability, shapes=tuple(cp.shapes)),
-            cluster_epsilon=cp.cluster_epsilon, eps=cp.eps, min_samples=cp.min_samples, seed=cp.seed,
-            free_segments=cp.free_segments, free_min_points=cp.free_min_points, block_points=cp.block_points,
-            block_margin=cp.block_margin, sparse_factor=cp.sparse_factor, group_gap=cp.group_gap,
-            group_min_contacts=cp.group_min_contacts, group_max_plane=cp.group_max_plane,
-            group_set_in=cp.group_set_in, group_stack=cp.group_stack,
-        )
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> CoarseParams:
-        d = dict(data)
-        d.setdefault("block_points", 0)  # stores written before blocks existed: tiles whole
-        d.setdefault("block_margin", None)
-        d.setdefault("group_gap", 0.0)  # stores written before element groups: one group per segment
-        d.setdefault("sparse_factor", 0.0)  # stores written before the sparse pass: one pass
-        d["ransac"] = RansacParams.from_dict(d["ransac"])
-        return cls(**d)
 
 
 def _tile_points(store: RunStore, tile: int, scale: np.ndarray) -> dict[str, np.ndarray]:
@@ -244,263 +73,6 @@ def _tile_points(store: RunStore, tile: int, scale: np.ndarray) -> dict[str, np.
     return d
 
 
-def _segment_points(xyz: np.ndarray, params: CoarseParams, eps: float, rng: np.random.Generator,
-                    *, sparse_pass: bool = True) -> tuple[np.ndarray, list[dict[str, Any]], np.ndarray]:
-    """Normals, Efficient RANSAC and DBSCAN on one set of points, then (``sparse_factor``)
-    once more, at a coarser scale, on the sparse points the first pass left unsegmented.
-
-    Returns the segment of every point (``1..S``, 0 = unsegmented), the fit of every
-    segment (``fits[s - 1]``: ``kind``, ``params`` as a JSON list, ``rms``; kind
-    ``"free"`` for a cluster of points no primitive explains) and which points have no
-    normal.
-    """
-    n = len(xyz)
-    labels: np.ndarray | None = None  # made after the search where it found nothing to label
-    prims: tuple[Any, ...] = ()
-    no_normal = np.zeros(n, dtype=bool)
-    if n:
-        nr = estimate_normals(xyz, k=params.k)
-        normals, valid = nr.normals, nr.valid
-        del nr  # the curvature is not used here: 8 bytes a point less during the search
-        no_normal = ~valid
-        if valid.sum() >= params.ransac.min_support:
-            # A point without a normal has a zero normal, which efficient_ransac leaves
-            # unassigned: the whole arrays give the labels xyz[valid] would, without two
-            # copies of the points (48 bytes a point) held through the search.
-            res = efficient_ransac(xyz, normals, **params.ransac.to_dict(), rng=rng)
-            labels = res.labels
-            prims = res.primitives
-        del normals
-    if labels is None:
-        labels = np.full(n, -1, dtype=np.int64)
-    free = len(prims)  # the group of points no primitive explains
-    groups = np.where(labels < 0, free if params.free_segments else -1, labels)
-    segment = dbscan_segments(xyz, groups, eps=eps, min_samples=params.min_samples) if n else np.zeros(0, np.int64)
-    segment = segment.astype(np.int64, copy=False)
-    if params.free_segments and n:
-        in_free = (groups == free) & (segment > 0)
-        sizes = np.bincount(segment[in_free], minlength=int(segment.max(initial=0)) + 1)
-        segment[in_free & (sizes[segment] < params.free_min_points)] = 0
-    # Dense ids 1..S (DBSCAN may leave gaps after the free filter).
-    has = segment > 0
-    ids, segment[has] = np.unique(segment[has], return_inverse=True)
-    segment[has] += 1
-    seg_group = np.zeros(len(ids), dtype=np.int64)
-    seg_group[segment[has] - 1] = groups[has]
-    fits = [{"kind": "free", "params": "[]", "rms": float("nan")} if g == free else
-            {"kind": prims[g].kind, "params": json.dumps(list(prims[g].params)), "rms": float(prims[g].rms)}
-            for g in seg_group.tolist()]
-    if sparse_pass and params.sparse_factor > 0 and n:
-        # Far surfaces of a terrestrial scan are several times sparser than the ground
-        # near a station, which sets eps and the bitmap cell: there a second pass with
-        # every distance scaled up (docs/method.md, "Sparse second pass").
-        spacing = eps / 3.0
-        rows, _ = sparse_points(xyz, segment == 0, spacing, params.sparse_factor)
-        if len(rows) >= params.free_min_points:
-            # One scale for every tile (not the tile's own sparse spacing): tiles of one
-            # scan must fit with the same parameters for the stitching to join them.
-            f = 2.0 * params.sparse_factor
-            r = params.ransac
-            sub = replace(params, ransac=replace(r, epsilon=r.epsilon * f, cluster_epsilon=r.cluster_epsilon * f,
-                                                 min_support=max(params.free_min_points, int(r.min_support / f**2))))
-            seg2, fits2, _ = _segment_points(xyz[rows], sub, eps * f, rng, sparse_pass=False)
-            got = seg2 > 0
-            n1 = len(fits)
-            segment[rows[got]] = seg2[got] + n1
-            fits = fits + fits2
-            if fits2:
-                segment, fits = _join_passes(xyz, segment, fits, n1, eps * f, params)
-    return segment, fits, no_normal
-
-
-def _join_passes(xyz: np.ndarray, segment: np.ndarray, fits: list[dict[str, Any]], n1: int, gap: float,
-                 params: CoarseParams) -> tuple[np.ndarray, list[dict[str, Any]]]:
-    """Join each sparse-pass segment (ids > ``n1``) to the first-pass segments it touches
-    (within ``gap``) that are the same primitive: the far, sparse part of a ground plane
-    is that plane. Without this, two tiles' stitching would join them where one tile saw
-    the part dense and the other sparse, and the answer would depend on the tile size."""
-    a, b, _ = segment_contacts(xyz, segment, gap, min_contacts=3)
-    cross = (a <= n1) & (b > n1)
-    a, b = a[cross], b[cross]
-    keep = np.array([_same_primitive(fits[i - 1], fits[j - 1], params) for i, j in zip(a.tolist(), b.tolist(),
-                                                                                        strict=True)], dtype=bool)
-    if not keep.any():
-        return segment, fits
-    uf = UnionFind(len(fits) + 1)
-    uf.union_pairs(a[keep], b[keep])
-    root = uf.find(np.arange(len(fits) + 1))
-    # Each joined set takes the id and fit of its lowest member (a first-pass segment).
-    low = np.full(len(fits) + 1, len(fits) + 1, dtype=np.int64)
-    np.minimum.at(low, root, np.arange(len(fits) + 1))
-    new_id = low[root]
-    live = np.unique(new_id[1:])
-    dense = np.zeros(len(fits) + 2, dtype=np.int64)
-    dense[live] = np.arange(1, len(live) + 1)
-    segment = np.where(segment > 0, dense[new_id[segment]], 0)
-    return segment, [fits[i - 1] for i in live.tolist()]
-
-
-def _segment_block(xyz: np.ndarray, rows: np.ndarray, mine: np.ndarray, b: int, params: CoarseParams,
-                   eps: float, tile: int) -> dict[str, Any]:
-    """Segment block ``b`` of a tile with the points within its margin as context.
-
-    ``xyz`` are the context's points (store-local metres), ``rows`` their tile rows and
-    ``mine`` which of them block ``b`` owns (:func:`_block_inputs`). Returns what the join
-    needs (:func:`_join_blocks`): the block's own rows and their segments, the segmented
-    context rows of other blocks and their segments, the fits and the block's points
-    without a normal.
-    """
-    rng = np.random.default_rng(np.random.SeedSequence([params.seed, tile, b]))
-    seg, fits, no_normal = _segment_points(xyz, params, eps, rng)
-    other = ~mine & (seg > 0)
-    return {"own_rows": rows[mine], "own_seg": seg[mine], "other_rows": rows[other], "other_seg": seg[other],
-            "fits": fits, "n_invalid": int(no_normal[mine].sum())}
-
-
-#: A block whose context (its own points and those within the margin) holds more than
-#: this many times ``block_points`` is cut again (:func:`_block_inputs`): a block task's
-#: memory follows its context. The 10 M- and 100 M-point benchmarks' largest contexts are
-#: 0.98 ``block_points``; at 200 M one block of 2.09 M own points had 2.71 M (1.23).
-CONTEXT_FACTOR = 1.2
-
-
-def _block_inputs(xy: np.ndarray, cap: int, margin: float, scale: np.ndarray | None = None
-                  ) -> tuple[int, Iterator[tuple[np.ndarray, np.ndarray]]]:
-    """The blocks of a tile (:func:`primitives.blocks.split_blocks`) and, for each, its
-    context: the tile rows within ``margin`` of the block's rectangle and which of them
-    the block owns. ``xy`` are metres, or the store's integer coordinates with their
-    ``scale`` (the same blocks and contexts, to the bit). Returns the number of blocks and
-    ``(rows, mine)`` per block, each made when it is taken.
-
-    A block whose context holds more than ``CONTEXT_FACTOR * cap`` points (a dense spot
-    just outside it) has its own points split again in halves, the first half keeping
-    its number and the others numbered after the last block, while it still owns more
-    than ``cap / 4`` points.
-    """
-    block_of, rects = split_blocks(xy, cap, scale)
-    s = np.ones(2) if scale is None else np.asarray(scale, dtype=np.float64)[:2]
-
-    def context(rect: np.ndarray) -> np.ndarray:
-        # In metres a piece at a time, as xy * scale: no float copy of the tile.
-        return np.concatenate([block_context(xy[a:a + READ_ROWS, :2].astype(np.float64) * s, rect, margin) + a
-                               for a in range(0, len(xy), READ_ROWS)] or [np.zeros(0, np.int64)])
-
-    rect_list = list(rects)
-    b = 0
-    while b < len(rect_list):
-        if len(context(rect_list[b])) > CONTEXT_FACTOR * cap:
-            own = np.flatnonzero(block_of == b)
-            if 4 * len(own) > cap:
-                sub_of, sub_rects = split_blocks(xy[own], (len(own) + 1) // 2, scale)
-                if len(sub_rects) > 1:
-                    for j in range(1, len(sub_rects)):
-                        block_of[own[sub_of == j]] = len(rect_list)
-                        rect_list.append(sub_rects[j])
-                    rect_list[b] = sub_rects[0]
-                    continue  # the first half again
-        b += 1
-
-    def contexts() -> Iterator[tuple[np.ndarray, np.ndarray]]:
-        for b, rect in enumerate(rect_list):
-            ctx = context(rect)
-            yield ctx, block_of[ctx] == b
-
-    return len(rect_list), contexts()
-
-
-def _join_blocks(n: int, results: Iterable[dict[str, Any]], params: CoarseParams
-                 ) -> tuple[np.ndarray, list[dict[str, Any]], int]:
-    """Join the blocks' segments over their context points, as tiles are joined over their
-    buffers (at least 3 shared points and the same primitive within the tolerances).
-
-    ``results`` are the blocks' results in block order (:func:`_segment_block`), taken one
-    at a time (a store-backed run reads each when it is needed), so memory follows one
-    block and a few bytes per point of the tile. Returns segment per point of the tile
-    (int32), fits per segment and points without a normal.
-    """
-    own_key = np.full(n, -1, dtype=np.int32)  # each point's key: block b's segment s -> base_b + s - 1
-    all_fits: list[dict[str, Any]] = []
-    shared: list[tuple[np.ndarray, np.ndarray]] = []  # (context key, owner's point index)
-    owned_parts: list[np.ndarray] = []  # points owned per key
-    first_parts: list[np.ndarray] = []  # lowest owned point per key
-    n_invalid = 0
-    base = 0
-    for r in results:
-        n_fits = len(r["fits"])
-        rows = np.asarray(r["own_rows"], dtype=np.int64)
-        seg = np.asarray(r["own_seg"], dtype=np.int64)
-        ok = seg > 0
-        rows, local = rows[ok], seg[ok] - 1
-        own_key[rows] = base + local
-        owned_parts.append(np.bincount(local, minlength=n_fits))
-        first = np.full(n_fits, n, dtype=np.int64)
-        np.minimum.at(first, local, rows)
-        first_parts.append(first)
-        shared.append((base + np.asarray(r["other_seg"], dtype=np.int64) - 1,
-                       np.asarray(r["other_rows"], dtype=np.int64)))
-        all_fits.extend(r["fits"])
-        n_invalid += int(r["n_invalid"])
-        base += n_fits
-    n_keys = base
-    uf = UnionFind(n_keys)
-    pairs: dict[tuple[int, int], int] = {}
-    for ka, pts in shared:
-        kb = own_key[pts].astype(np.int64)
-        ok = kb >= 0
-        lo, hi = np.minimum(ka[ok], kb[ok]), np.maximum(ka[ok], kb[ok])
-        u, cnt = np.unique(lo * n_keys + hi, return_counts=True)
-        for c_, k_ in zip(u.tolist(), cnt.tolist(), strict=True):
-            pr = (c_ // n_keys, c_ % n_keys)
-            pairs[pr] = pairs.get(pr, 0) + k_
-    sel = [pr for pr, k_ in sorted(pairs.items())
-           if k_ >= 3 and _same_primitive(all_fits[pr[0]], all_fits[pr[1]], params)]
-    if sel:
-        arr = np.asarray(sel, dtype=np.int64)
-        uf.union_pairs(arr[:, 0], arr[:, 1])
-    # Tile segments 1..S: the roots that own points, in order of their lowest point; the
-    # fit of each is that of its member with the most owned points.
-    root = uf.find(np.arange(n_keys)) if n_keys else np.zeros(0, np.int64)
-    owned = np.concatenate(owned_parts) if owned_parts else np.zeros(0, np.int64)
-    first = np.full(n_keys, n, dtype=np.int64)
-    if n_keys:
-        np.minimum.at(first, root, np.concatenate(first_parts))
-    live = np.flatnonzero(first < n)
-    live = live[np.argsort(first[live], kind="stable")]
-    seg_of_root = np.zeros(n_keys, dtype=np.int64)
-    seg_of_root[live] = np.arange(1, len(live) + 1)
-    seg_of_key = seg_of_root[root].astype(np.int32)
-    segment = np.zeros(n, dtype=np.int32)
-    has = own_key >= 0
-    segment[has] = seg_of_key[own_key[has]]
-    best = np.full(n_keys, -1, dtype=np.int64)
-    for k in np.argsort(owned, kind="stable").tolist():  # ascending: the largest wins last
-        if owned[k]:
-            best[root[k]] = k
-    fits = [all_fits[int(best[r])] for r in live.tolist()]
-    return segment, fits, n_invalid
-
-
-def _segment_tile(xyz: np.ndarray, params: CoarseParams, eps: float, tile: int, margin: float
-                  ) -> tuple[np.ndarray, list[dict[str, Any]], int, int]:
-    """Segment a tile whole, or block by block when it holds more than ``block_points``.
-
-    A dense tile (near a scanner station it can hold several times the average) is cut
-    into x-y blocks of at most ``block_points`` points (:func:`primitives.blocks.split_blocks`),
-    each segmented with its context (:func:`_segment_block`) and joined
-    (:func:`_join_blocks`). :func:`run_coarse` runs the blocks of such a tile as tasks of
-    their own (:func:`coarse_block`); this in-process loop gives the same answer. Returns
-    segment per point, fits per segment, points without a normal and the number of blocks.
-    """
-    n = len(xyz)
-    cap = params.block_points
-    if not cap or n <= cap:
-        rng = np.random.default_rng(np.random.SeedSequence([params.seed, tile]))
-        seg, fits, no_normal = _segment_points(xyz, params, eps, rng)
-        return seg, fits, int(no_normal.sum()), 1
-    n_blocks, inputs = _block_inputs(xyz[:, :2], cap, margin)
-    results = (_segment_block(xyz[rows], rows, mine, b, params, eps, tile) for b, (rows, mine) in enumerate(inputs))
-    segment, fits, n_invalid = _join_blocks(n, results, params)
-    return segment, fits, n_invalid, n_blocks
 
 
 def _margin(store: RunStore, cfg: dict[str, Any], params: CoarseParams) -> float:
@@ -526,7 +98,7 @@ def plan_blocks(url: str, tile: int, cfg: dict[str, Any]) -> int:
     # holds the stored coordinates (12 bytes a row) and about 17 bytes a row more during
     # the split, not a float copy of the tile (the 7.9 M rows of the 100 M-point
     # benchmark's densest tile cost about 40 bytes a row with a float copy).
-    n_blocks, inputs = _block_inputs(raw, params.block_points, _margin(store, cfg, params), scale[:2])
+    n_blocks, inputs = block_inputs(raw, params.block_points, _margin(store, cfg, params), scale[:2])
     n_context = 0
     for b, (rows, mine) in enumerate(inputs):
         store.write_unit(f"coarse/block_input/{tile}/{b}", {"rows": rows, "mine": mine, "xyz": raw[rows]})
@@ -545,7 +117,7 @@ def coarse_block(url: str, tile: int, b: int, cfg: dict[str, Any]) -> dict[str, 
     scale = np.asarray(store.attrs["coords"]["scale"])
     d = store.read_unit(f"coarse/block_input/{tile}/{b}")
     # The same conversion as the tile's (_tile_points): the same metres, the same answer.
-    r = _segment_block(d["xyz"].astype(np.float64) * scale, d["rows"], d["mine"], b, params, cfg["eps"], tile)
+    r = segment_block(d["xyz"].astype(np.float64) * scale, d["rows"], d["mine"], b, params, cfg["eps"], tile)
     arrays, table = _block_results_path(tile, b)
     store.write_unit(arrays, {"own_rows": r["own_rows"].astype(np.int64), "own_seg": r["own_seg"].astype(np.int32),
                               "other_rows": r["other_rows"].astype(np.int64),
@@ -566,7 +138,7 @@ def _coarse_unit(url: str, tile: int, b: int, cfg: dict[str, Any]) -> dict[str, 
 
 
 def _block_results(store: RunStore, tile: int, n_blocks: int) -> Iterator[dict[str, Any]]:
-    """The results of a tile's block tasks, one block at a time (for :func:`_join_blocks`)."""
+    """The results of a tile's block tasks, one block at a time (for :func:`join_blocks`)."""
     recs = store.records(BLOCK_STAGE)
     for b in range(n_blocks):
         arrays, table = _block_results_path(tile, b)
@@ -645,7 +217,7 @@ def coarse_tile(url: str, tile: int, cfg: dict[str, Any], n_blocks: int = 0) -> 
     tasks, :func:`coarse_block`); write its arrays and table, then its record.
 
     A join holds a few bytes per point of the tile and one block's results at a time
-    (:func:`_join_blocks`, :func:`_tile_summary`), never the tile's coordinates: a tile
+    (:func:`join_blocks`, :func:`_tile_summary`), never the tile's coordinates: a tile
     above ``block_points`` costs its join no more memory than a block task."""
     store = RunStore.open(url, mode="a")
     params = CoarseParams.from_dict(cfg["params"])
@@ -654,10 +226,10 @@ def coarse_tile(url: str, tile: int, cfg: dict[str, Any], n_blocks: int = 0) -> 
     n = store.array_length(f"tiles/{tile}/index")
     from_tasks = bool(n_blocks)
     if from_tasks:
-        segment, fits, n_invalid = _join_blocks(n, _block_results(store, tile, n_blocks), params)
+        segment, fits, n_invalid = join_blocks(n, _block_results(store, tile, n_blocks), params)
     else:
         xyz = _tile_points(store, tile, scale)["local"]
-        segment, fits, n_invalid, n_blocks = _segment_tile(xyz, params, cfg["eps"], tile, _margin(store, cfg, params))
+        segment, fits, n_invalid, n_blocks = segment_tile(xyz, params, cfg["eps"], tile, _margin(store, cfg, params))
         del xyz
     segment = segment.astype(np.int32, copy=False)
     kinds = np.array([0] + [PRIMITIVE_CODES.get(f["kind"], 0) for f in fits], dtype=np.uint8)  # free: 0
@@ -727,40 +299,6 @@ def _read_table(store: RunStore, rel: str) -> pa.Table:
         return pq.read_table(f)
 
 
-def _same_primitive(a: dict[str, Any], b: dict[str, Any], p: CoarseParams) -> bool:
-    """Whether two tiles' fits describe the same primitive (within the tolerances)."""
-    if a["kind"] != b["kind"]:
-        return False
-    if a["kind"] == "free":  # no parameters to compare: shared points decide
-        return True
-    pa_, pb = np.asarray(json.loads(a["params"])), np.asarray(json.loads(b["params"]))
-    cos_tol = math.cos(math.radians(p.angle_tol_deg))
-    if a["kind"] == "plane":
-        if abs(float(pa_[:3] @ pb[:3])) < cos_tol:
-            return False
-        sign = 1.0 if float(pa_[:3] @ pb[:3]) > 0 else -1.0
-        return abs(pa_[3] - sign * pb[3]) <= p.distance_tol
-    if a["kind"] == "sphere":
-        return (np.linalg.norm(pa_[:3] - pb[:3]) <= p.distance_tol + p.radius_tol * pa_[3]
-                and abs(pa_[3] - pb[3]) <= p.radius_tol * max(pa_[3], pb[3]))
-    if a["kind"] == "cylinder":
-        axis_a, axis_b = pa_[3:6], pb[3:6]
-        if abs(float(axis_a @ axis_b)) < cos_tol:
-            return False
-        d = pb[:3] - pa_[:3]
-        off_axis = np.linalg.norm(d - (d @ axis_a) * axis_a)
-        return off_axis <= p.distance_tol + p.radius_tol * pa_[6] and abs(pa_[6] - pb[6]) <= p.radius_tol * max(pa_[6], pb[6])
-    if a["kind"] == "torus":  # centre (3), axis (3), major R, minor r
-        if abs(float(pa_[3:6] @ pb[3:6])) < cos_tol:
-            return False
-        return (np.linalg.norm(pa_[:3] - pb[:3]) <= p.distance_tol + p.radius_tol * pa_[6]
-                and abs(pa_[6] - pb[6]) <= p.radius_tol * max(pa_[6], pb[6])
-                and abs(pa_[7] - pb[7]) <= p.radius_tol * max(pa_[7], pb[7]) + p.distance_tol)
-    if a["kind"] == "cone":
-        if abs(float(pa_[3:6] @ pb[3:6])) < cos_tol:
-            return False
-        return np.linalg.norm(pa_[:3] - pb[:3]) <= 5 * p.distance_tol and abs(pa_[6] - pb[6]) <= math.radians(p.angle_tol_deg)
-    return False
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -862,7 +400,7 @@ def _element_groups(store: RunStore, tiles: Sequence[int], keys: list[tuple[int,
     ra, rb, cnt = np.concatenate(pairs_a), np.concatenate(pairs_b), np.concatenate(pairs_n)
     wall_of: dict[int, int] = {}
     if params.group_set_in > 0:
-        wall_of = _set_in_walls(ra, rb, cnt, large, plane, box, np.asarray(store.attrs["coords"]["offset"], np.float64),
+        wall_of = set_in_walls(ra, rb, cnt, large, plane, box, np.asarray(store.attrs["coords"]["offset"], np.float64),
                                 params.group_set_in)
     set_in = np.zeros(n, dtype=bool)
     set_in[list(wall_of)] = True
@@ -872,76 +410,11 @@ def _element_groups(store: RunStore, tiles: Sequence[int], keys: list[tuple[int,
     if wall_of:
         uf.union_pairs(np.asarray(list(wall_of), dtype=np.int64), np.asarray(list(wall_of.values()), dtype=np.int64))
     if params.group_stack > 0:
-        _join_stacked(uf, large, box, params.group_stack)
+        join_stacked(uf, large, box, params.group_stack)
     return uf.find(np.arange(n))
 
 
-def _join_stacked(uf: UnionFind, large: np.ndarray, box: dict[int, list[float]], gap: float) -> None:
-    """Join the element groups stacked one on another (``CoarseParams.group_stack``,
-    :func:`primitives.group.stacked_pairs`); groups holding a large segment stay apart."""
-    roots = np.asarray(sorted(box), dtype=np.int64)
-    if len(roots) < 2:
-        return
-    g = uf.find(roots)
-    gbox: dict[int, np.ndarray] = {}
-    has_large: set[int] = set()
-    for r, gr in zip(roots.tolist(), g.tolist(), strict=True):
-        b = np.asarray(box[r], dtype=np.float64)
-        cur = gbox.get(gr)
-        gbox[gr] = b if cur is None else np.r_[np.minimum(cur[:3], b[:3]), np.maximum(cur[3:], b[3:])]
-        if large[r]:
-            has_large.add(gr)
-    groups = [gr for gr in sorted(gbox) if gr not in has_large]
-    if len(groups) < 2:
-        return
-    lo, up = stacked_pairs(np.vstack([gbox[gr] for gr in groups]), gap)
-    if len(lo):
-        ids = np.asarray(groups, dtype=np.int64)
-        uf.union_pairs(ids[lo], ids[up])
 
-
-#: A free segment (no primitive) is large, and never grouped, above this many times
-#: ``group_max_plane`` in x-y: no element is that wide, but the leftover points along a
-#: facade can be one free strip that touches everything on it.
-STRIP_FACTOR = 3.0
-
-#: A large plane takes the segments set in it only when it is a wall: the z component of
-#: its unit normal at most this (about 17 degrees from vertical).
-SET_IN_MAX_NZ = 0.3
-
-
-def _set_in_walls(ra: np.ndarray, rb: np.ndarray, cnt: np.ndarray, large: np.ndarray, plane: dict[int, Any],
-                  box: dict[int, list[float]], offset: np.ndarray, tol: float) -> dict[int, int]:
-    """The wall each stitched segment is set in (``CoarseParams.group_set_in``): a
-    segment that touches a large near-vertical plane and lies within ``tol`` of it and
-    inside its box (:func:`primitives.group.set_in_plane`); of several, the one with most
-    contacts. Such a segment joins that wall and none of its other neighbours, so two
-    walls never join through it."""
-    one = large[ra] != large[rb]
-    small = np.where(large[ra[one]], rb[one], ra[one])
-    wall = np.where(large[ra[one]], ra[one], rb[one])
-    count: dict[tuple[int, int], int] = {}
-    for s_, w, k in zip(small.tolist(), wall.tolist(), cnt[one].tolist(), strict=True):
-        count[(s_, w)] = count.get((s_, w), 0) + k
-    by_wall: dict[int, list[int]] = {}
-    for s_, w in count:
-        by_wall.setdefault(w, []).append(s_)
-    shift = np.r_[offset, offset]
-    best: dict[int, tuple[int, int]] = {}
-    for w, smalls in sorted(by_wall.items()):
-        fit = json.loads(plane[w]) if isinstance(plane[w], str) else plane[w]
-        if len(fit) < 4:
-            continue
-        normal = np.asarray(fit[:3], dtype=np.float64)
-        if abs(normal[2]) > SET_IN_MAX_NZ * float(np.linalg.norm(normal)):
-            continue
-        smalls = sorted(smalls)
-        boxes = np.asarray([box[s_] for s_ in smalls], dtype=np.float64) - shift
-        inside = set_in_plane(boxes, normal, float(fit[3]), np.asarray(box[w], dtype=np.float64) - shift, tol)
-        for s_, ok in zip(smalls, inside.tolist(), strict=True):
-            if ok and count[(s_, w)] > best.get(s_, (-1, -1))[0]:
-                best[s_] = (count[(s_, w)], w)
-    return {s_: w for s_, (_, w) in sorted(best.items())}
 
 
 def _joined(parts: list[np.ndarray]) -> np.ndarray:
@@ -1048,7 +521,7 @@ def _stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tupl
                     pair_counts[k2] = pair_counts.get(k2, 0) + n_
     cache.clear()
     sel = [(i, j) for (i, j), n in sorted(pair_counts.items())
-           if n >= 3 and _same_primitive(info[keys[i]], info[keys[j]], params)]
+           if n >= 3 and same_primitive(info[keys[i]], info[keys[j]], params)]
     if sel:
         arr = np.asarray(sel, dtype=np.int64)
         uf.union_pairs(arr[:, 0], arr[:, 1])
@@ -1190,7 +663,7 @@ FALLBACK_EPS = 0.3
 # coarse-v3: segments set in a wall join it, stacked groups join (group_set_in, group_stack);
 # coarse-v4: a free segment wider than STRIP_FACTOR x group_max_plane is large;
 # coarse-v6 (v5 named a trial that was dropped): a block whose context holds more than
-# CONTEXT_FACTOR x block_points is cut again (_block_inputs).
+# CONTEXT_FACTOR x block_points is cut again (block_inputs).
 COARSE_ALGORITHM = "coarse-v6"
 SPACING_WINDOWS = 1024
 WINDOW_ROWS = 1024

@@ -11,7 +11,9 @@ planes into one element group, the unit the hierarchical tree then splits
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterable, Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -20,9 +22,10 @@ from scipy.spatial import cKDTree
 from hollowtree.columns import column_max, column_min
 from hollowtree.errors import ConfigError
 from hollowtree.primitives._validation import as_xyz
+from hollowtree.primitives.stitch import UnionFind
 
-__all__ = ["box_plane_distance", "large_segments", "segment_contacts", "segment_contacts_chunked", "set_in_plane",
-           "stacked_pairs"]
+__all__ = ["SET_IN_MAX_NZ", "STRIP_FACTOR", "box_plane_distance", "join_stacked", "large_segments",
+           "segment_contacts", "segment_contacts_chunked", "set_in_plane", "set_in_walls", "stacked_pairs"]
 
 
 def _first_per_voxel(v: npt.NDArray[np.int64], segment: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
@@ -312,3 +315,72 @@ def large_segments(kinds: Sequence[str], boxes: npt.ArrayLike, max_plane: float,
     plane = np.asarray([k == "plane" for k in kinds], dtype=bool)
     free = np.asarray([k == "free" for k in kinds], dtype=bool)
     return (plane & (diag > max_plane)) | (free & (diag > strip_factor * max_plane))
+
+
+def join_stacked(uf: UnionFind, large: np.ndarray, box: dict[int, list[float]], gap: float) -> None:
+    """Join the element groups stacked one on another (``CoarseParams.group_stack``,
+    :func:`primitives.group.stacked_pairs`); groups holding a large segment stay apart."""
+    roots = np.asarray(sorted(box), dtype=np.int64)
+    if len(roots) < 2:
+        return
+    g = uf.find(roots)
+    gbox: dict[int, np.ndarray] = {}
+    has_large: set[int] = set()
+    for r, gr in zip(roots.tolist(), g.tolist(), strict=True):
+        b = np.asarray(box[r], dtype=np.float64)
+        cur = gbox.get(gr)
+        gbox[gr] = b if cur is None else np.r_[np.minimum(cur[:3], b[:3]), np.maximum(cur[3:], b[3:])]
+        if large[r]:
+            has_large.add(gr)
+    groups = [gr for gr in sorted(gbox) if gr not in has_large]
+    if len(groups) < 2:
+        return
+    lo, up = stacked_pairs(np.vstack([gbox[gr] for gr in groups]), gap)
+    if len(lo):
+        ids = np.asarray(groups, dtype=np.int64)
+        uf.union_pairs(ids[lo], ids[up])
+
+
+
+#: A free segment (no primitive) is large, and never grouped, above this many times
+#: ``group_max_plane`` in x-y: no element is that wide, but the leftover points along a
+#: facade can be one free strip that touches everything on it.
+STRIP_FACTOR = 3.0
+
+#: A large plane takes the segments set in it only when it is a wall: the z component of
+#: its unit normal at most this (about 17 degrees from vertical).
+SET_IN_MAX_NZ = 0.3
+
+
+def set_in_walls(ra: np.ndarray, rb: np.ndarray, cnt: np.ndarray, large: np.ndarray, plane: dict[int, Any],
+                  box: dict[int, list[float]], offset: np.ndarray, tol: float) -> dict[int, int]:
+    """The wall each stitched segment is set in (``CoarseParams.group_set_in``): a
+    segment that touches a large near-vertical plane and lies within ``tol`` of it and
+    inside its box (:func:`primitives.group.set_in_plane`); of several, the one with most
+    contacts. Such a segment joins that wall and none of its other neighbours, so two
+    walls never join through it."""
+    one = large[ra] != large[rb]
+    small = np.where(large[ra[one]], rb[one], ra[one])
+    wall = np.where(large[ra[one]], ra[one], rb[one])
+    count: dict[tuple[int, int], int] = {}
+    for s_, w, k in zip(small.tolist(), wall.tolist(), cnt[one].tolist(), strict=True):
+        count[(s_, w)] = count.get((s_, w), 0) + k
+    by_wall: dict[int, list[int]] = {}
+    for s_, w in count:
+        by_wall.setdefault(w, []).append(s_)
+    shift = np.r_[offset, offset]
+    best: dict[int, tuple[int, int]] = {}
+    for w, smalls in sorted(by_wall.items()):
+        fit = json.loads(plane[w]) if isinstance(plane[w], str) else plane[w]
+        if len(fit) < 4:
+            continue
+        normal = np.asarray(fit[:3], dtype=np.float64)
+        if abs(normal[2]) > SET_IN_MAX_NZ * float(np.linalg.norm(normal)):
+            continue
+        smalls = sorted(smalls)
+        boxes = np.asarray([box[s_] for s_ in smalls], dtype=np.float64) - shift
+        inside = set_in_plane(boxes, normal, float(fit[3]), np.asarray(box[w], dtype=np.float64) - shift, tol)
+        for s_, ok in zip(smalls, inside.tolist(), strict=True):
+            if ok and count[(s_, w)] > best.get(s_, (-1, -1))[0]:
+                best[s_] = (count[(s_, w)], w)
+    return {s_: w for s_, (_, w) in sorted(best.items())}

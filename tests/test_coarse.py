@@ -165,18 +165,18 @@ def test_a_block_with_a_dense_context_is_cut_again():
     """A block whose context (own points and those within the margin) holds more than
     CONTEXT_FACTOR * block_points is split again while it owns more than a quarter of
     block_points; blocks with a small context are split_blocks' own, numbers included."""
-    from hollowtree.pipeline.coarse import CONTEXT_FACTOR, _block_inputs
     from hollowtree.primitives.blocks import block_context, split_blocks
+    from hollowtree.primitives.segment import CONTEXT_FACTOR, block_inputs
 
     xy = np.random.default_rng(3).random((20_000, 2)) * 10.0
     cap = 10_000
     block_of, rects = split_blocks(xy, cap)
-    n, inputs = _block_inputs(xy, cap, 0.05)  # a thin margin: split_blocks' blocks
+    n, inputs = block_inputs(xy, cap, 0.05)  # a thin margin: split_blocks' blocks
     assert n == len(rects)
     for b, (rows, mine) in enumerate(inputs):
         np.testing.assert_array_equal(rows, block_context(xy, rects[b], 0.05))
         np.testing.assert_array_equal(rows[mine], np.flatnonzero(block_of == b))
-    n, inputs = _block_inputs(xy, cap, 2.0)  # contexts of about 1.4 blocks: cut again
+    n, inputs = block_inputs(xy, cap, 2.0)  # contexts of about 1.4 blocks: cut again
     assert n > len(rects)
     owner = np.full(len(xy), -1)
     for b, (rows, mine) in enumerate(inputs):
@@ -401,7 +401,7 @@ def test_stacked_stages_are_one_group(scan, untiled_run, tmp_path):
 def test_sparse_pass_segments_a_far_thin_surface():
     """A wall scanned 10x sparser than the ground that sets eps is segmented only by the
     sparse pass (``sparse_factor``); the dense ground is segmented either way."""
-    from hollowtree.pipeline.coarse import _segment_points
+    from hollowtree.primitives.segment import segment_points
 
     rng = np.random.default_rng(1)
     ground = np.c_[rng.uniform(0, 20, (160_000, 2)), rng.normal(0, 0.002, 160_000)]  # 0.05 m
@@ -411,8 +411,8 @@ def test_sparse_pass_segments_a_far_thin_surface():
     xyz = np.r_[ground, wall]
     eps = 0.15  # 3 x the ground's spacing, as the stage's default would set it
     far = np.arange(len(ground), len(xyz))
-    one, _, _ = _segment_points(xyz, CoarseParams(sparse_factor=0.0), eps, np.random.default_rng(0))
-    two, fits, _ = _segment_points(xyz, CoarseParams(sparse_factor=4.0), eps, np.random.default_rng(0))
+    one, _, _ = segment_points(xyz, CoarseParams(sparse_factor=0.0), eps, np.random.default_rng(0))
+    two, fits, _ = segment_points(xyz, CoarseParams(sparse_factor=4.0), eps, np.random.default_rng(0))
     assert (one[far] > 0).mean() < 0.1
     assert (two[far] > 0).mean() > 0.8
     main_far = np.bincount(two[far][two[far] > 0]).argmax()
@@ -423,13 +423,13 @@ def test_sparse_pass_segments_a_far_thin_surface():
 def test_sparse_part_of_a_plane_joins_its_dense_part():
     """Ground scanned densely near the station and sparsely beyond is one segment: the
     sparse pass's plane is joined to the first pass's where they touch and agree."""
-    from hollowtree.pipeline.coarse import _segment_points
+    from hollowtree.primitives.segment import segment_points
 
     rng = np.random.default_rng(2)
     near = np.c_[rng.uniform(0, 20, (160_000, 2)), rng.normal(0, 0.002, 160_000)]  # 0.05 m
     far = np.c_[rng.uniform(20, 60, 12_800), rng.uniform(0, 20, 12_800), rng.normal(0, 0.01, 12_800)]  # 0.25 m
     xyz = np.r_[near, far]
-    seg, fits, _ = _segment_points(xyz, CoarseParams(sparse_factor=2.0), 0.15, np.random.default_rng(0))
+    seg, fits, _ = segment_points(xyz, CoarseParams(sparse_factor=2.0), 0.15, np.random.default_rng(0))
     main_near = np.bincount(seg[: len(near)][seg[: len(near)] > 0]).argmax()
     assert (seg[len(near):] == main_near).mean() > 0.8
     assert fits[main_near - 1]["kind"] == "plane"
@@ -439,13 +439,8 @@ def test_block_tasks_equal_the_in_process_blocks(blocked8k):
     """run_coarse runs the blocks of a dense tile as tasks of their own and joins them in a
     second round: the tile's segments equal those of the in-process loop, point by point,
     and the blocks' inputs and intermediate results are gone once the tile is recorded."""
-    from hollowtree.pipeline.coarse import (
-        BLOCK_STAGE,
-        PLAN_STAGE,
-        _margin,
-        _segment_tile,
-        _tile_points,
-    )
+    from hollowtree.pipeline.coarse import BLOCK_STAGE, PLAN_STAGE, _margin, _tile_points
+    from hollowtree.primitives.segment import segment_tile
 
     s = RunStore.open(blocked8k[1])
     stage = s.attrs["stages"]["coarse"]
@@ -459,7 +454,7 @@ def test_block_tasks_equal_the_in_process_blocks(blocked8k):
                                                                                 for t in blocked}
     for t in blocked:
         xyz = _tile_points(s, t, np.asarray(s.attrs["coords"]["scale"]))["local"]
-        seg, _, _, n_blocks = _segment_tile(xyz, params, cfg["eps"], t, _margin(s, cfg, params))
+        seg, _, _, n_blocks = segment_tile(xyz, params, cfg["eps"], t, _margin(s, cfg, params))
         assert n_blocks == recs[str(t)]["n_blocks"]
         assert np.array_equal(s.read_unit(f"coarse/tiles/{t}", ["segment"])["segment"], seg)
         for group in ("blocks", "block_input", "block_of"):
@@ -586,7 +581,7 @@ def test_segment_points_holds_no_copy_of_the_points():
     275 now)."""
     import tracemalloc
 
-    from hollowtree.pipeline.coarse import _segment_points
+    from hollowtree.primitives.segment import segment_points
 
     rng = np.random.default_rng(0)
     n = 200_000
@@ -598,7 +593,7 @@ def test_segment_points_holds_no_copy_of_the_points():
     xyz += rng.normal(0, 0.003, xyz.shape)
     tracemalloc.start()
     try:
-        segment, fits, _ = _segment_points(xyz, CoarseParams(sparse_factor=0), 0.1, np.random.default_rng(0))
+        segment, fits, _ = segment_points(xyz, CoarseParams(sparse_factor=0), 0.1, np.random.default_rng(0))
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
