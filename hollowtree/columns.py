@@ -4,7 +4,7 @@ NumPy reduces a C-ordered ``(n, k)`` array along axis 0 one row at a time, a ``k
 inner loop per row. For the ``(n, 3)`` and ``(n, 2)`` arrays every kernel here holds,
 ``a.min(axis=0)`` is 4x (``k = 3``) to 17x (``k = 2``) slower than reducing each column
 in turn, and ``np.ptp(a, axis=0)`` 9x (2 M points: 60 against 15 ms, 64 against 3.8 ms,
-133 against 14 ms; docs/decisions-benchmarks.md, "Less CPU for the same labels").
+133 against 14 ms; docs/decisions/speed-and-memory.md, "Less CPU for the same labels").
 Minimum and maximum are exact, so the values are those of the axis-0 reductions (NaN
 propagates alike, an empty array raises alike); only the sign of a zero extreme may
 differ where ``-0.0`` and ``0.0`` tie.

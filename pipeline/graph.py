@@ -90,7 +90,7 @@ def tune_process_for_streaming() -> None:
 #: nearly every large array and the next array's pages fault in zeroed again. A coarse
 #: block task of 2.1 M points took 22.3 s (7.9 s in the kernel) with it and 13.9 s
 #: (1.3 s) with glibc's own adaptive thresholds, peak 1,013 against 1,054 MB
-#: (docs/decisions-benchmarks.md, "Workers without Dask's trim threshold"). ``None``
+#: (docs/decisions/speed-and-memory.md, "Workers without Dask's trim threshold"). ``None``
 #: unsets it; a value in the environment still wins.
 _LOCAL_WORKER_CONFIG: dict[str, Any] = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
 
@@ -123,7 +123,7 @@ class in_child:  # noqa: N801  (used like a function: ``runner(in_child(fn), ...
     what earlier tasks left behind (the C allocator's fragments, scattered small objects):
     a coarse block task of 2.2 M points peaked at 789, 864 and 875 MB as the first,
     second and third task of one process, for the same +570 MB working set
-    (docs/decisions-benchmarks.md, "A child process per task"). ``prepare()`` runs in the
+    (docs/decisions/speed-and-memory.md, "A child process per task"). ``prepare()`` runs in the
     worker before each fork (cheap after its first call): what it loads there, such as
     compiled kernels, the children share copy-on-write instead of loading it each.
 
@@ -318,7 +318,7 @@ def fresh_workers(runner: Runner) -> None:
     and loads HollowNet, about 0.5 GB that a labels task would otherwise carry on top of
     its own working set, and the ingest's and coarse stage's heaps are not all handed back
     by ``malloc_trim`` (a coarse task peaked 70-120 MB higher, a tree task 150-250 MB
-    higher, in workers that had run the stage before; docs/decisions-benchmarks.md, "Fresh workers
+    higher, in workers that had run the stage before; docs/decisions/speed-and-memory.md, "Fresh workers
     after every stage").
     ``hollowtree run`` calls it after every stage that ran tasks. Takes 1.1-1.4 s
     (a new local cluster, :class:`_LocalClient`).

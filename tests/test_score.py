@@ -110,7 +110,7 @@ def test_shared_hits_matches_numpy():
 def test_kernel_reads_columns_without_gathers():
     """The kernel's point index is unsigned: with a signed one numba cannot rule out a
     negative (wrapping) index and LLVM reads every column through vector gathers, about
-    10x slower (docs/decisions-benchmarks.md, "Unsigned indices, subsets as slices, one
+    10x slower (docs/decisions/speed-and-memory.md, "Unsigned indices, subsets as slices, one
     thread per kernel"). Compiled afresh, since cached code has no assembly."""
     import numba
 

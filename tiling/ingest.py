@@ -500,7 +500,7 @@ def _voxel_representatives(
     reduce's batches are sorted by it) and the voxel and tile numbers fit in 63 bits
     together, that order is a stable sort of one packed integer key: the lexicographic
     sort's order to the row, in 0.58 of its time on a 10 M-point scan's batches (4x faster
-    on random points; docs/decisions-benchmarks.md, "The voxel sort as one packed key").
+    on random points; docs/decisions/speed-and-memory.md, "The voxel sort as one packed key").
     """
     key = np.floor(xyz * (scale / voxel)).astype(np.int64)
     cols = (key[:, 0], key[:, 1], key[:, 2], core_tile)

@@ -3,7 +3,7 @@
 The tree works on one element group at a time (the coarse stage's connected segments),
 so an arch whose front face went to one group and its soffit and back to another comes
 out as two arch instances, each about half the arch: neither covers it with IoU 0.5
-(Khudabad's 12 bays, docs/decisions.md). After every group's tree, two instances of the
+(Khudabad's 12 bays, docs/decisions/method.md). After every group's tree, two instances of the
 same class from different groups are one when their bounding boxes, each widened by
 ``pad`` metres, overlap by at least ``min_overlap`` of the box that the smaller of the
 two extents on each axis make (a portal's front face, 1 m deep, and its passage behind

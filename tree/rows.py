@@ -45,7 +45,7 @@ the merge across groups (tree/merge.py):
      of that bay (:func:`arcade_cells`'s map, applied like the merge map).
 
 Not in the paper, whose tree never sees an arcade as a row. Measured on Wazir Khan (three
-seeds, docs/decisions.md, "`tree-v15`"); the temple and Derawar have too few arch instances to make a
+seeds, docs/decisions/method.md, "`tree-v15`"); the temple and Derawar have too few arch instances to make a
 row, the Roman arcades are curved and Khudabad's is whole. Pure NumPy.
 """
 

@@ -2,7 +2,7 @@
 
 The paper keeps a node's best proposal when its energy ``xi = w . e`` passes a threshold.
 Fitted on the element groups the tree meets at run time, the five terms explain almost
-nothing of whether a split is right (R^2 0.06, docs/decisions.md "Rejected: the paper's
+nothing of whether a split is right (R^2 0.06, docs/decisions/method.md "Rejected: the paper's
 linear energy as the split decision"): a score of population balance, size, child count, a class prior and the mean
 child score cannot tell a storey of bays from half a dome. The split model adds what the
 decision needs, all of it computed from the node, the proposal and HollowNet's

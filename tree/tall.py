@@ -2,7 +2,7 @@
 
 HollowNet scales every part to fit its 30^3 grid, so a slender minaret and a column look
 alike; on the temple's minarets (44 m) it says ``pillar`` for the whole minaret
-(docs/decisions.md). The training scenes of HollowNet hold pillars of 2.5-8 m and minarets
+(docs/decisions/method.md). The training scenes of HollowNet hold pillars of 2.5-8 m and minarets
 of 12-40 m (``hollownet/_scenes.py``), so a part classed pillar that is taller than a
 bound between the two (``tree.pillar_max_height``, 10 m) is called a minaret, unless its
 footprint is flat: a minaret is round or polygonal seen from above, even when only one
