@@ -62,3 +62,13 @@ def test_a_bad_value_is_one_line(stage, flags, message):
     with pytest.raises(ConfigError, match=message.replace("(", r"\(").replace(")", r"\)")) as info:
         _cli(stage, *flags)
     assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("stage", list(STAGES))
+def test_the_kernels_defaults_are_the_workflows(stage):
+    """The stage parameters' own defaults (``CoarseParams()``, used by the kernels' callers
+    and the benchmarks) are those of the workflow section, which the CLI help and the JSON
+    schema are generated from."""
+    section, convert, _ = STAGES[stage]
+    params = convert(section())
+    assert type(params)() == params
