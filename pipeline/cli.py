@@ -103,6 +103,13 @@ def _stage_flag(parser: argparse.ArgumentParser, section: Any, key: str, *names:
     parser.add_argument(*names, dest=key, default=None, help=text, **kwargs)
 
 
+def _cluster_args(parser: argparse.ArgumentParser) -> None:
+    """Where a step command's tasks run, and its progress bars."""
+    parser.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process")
+    parser.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
 def _set_flag(parser: argparse.ArgumentParser, stage: str) -> None:
     parser.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
                         help=f"any key of the workflow's {stage} section (docs/workflows.md), the value read as "
@@ -230,9 +237,7 @@ def build_parser() -> argparse.ArgumentParser:
     _stage_flag(c, CoarseSection, "group_gap", "--group-gap", type=_non_negative)
     _stage_flag(c, CoarseSection, "seed", "--seed", type=int)
     _set_flag(c, "coarse")
-    c.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process")
-    c.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
-    c.add_argument("--no-progress", action="store_true", help="no progress bars")
+    _cluster_args(c)
     c.set_defaults(func=_cmd_coarse)
 
     from hollowtree.pipeline.hollownet_cmd import add_labelled_args
@@ -259,9 +264,7 @@ def build_parser() -> argparse.ArgumentParser:
     _stage_flag(tr, TreeSection, "device", "--device", choices=["cpu", "cuda", "auto"])
     _stage_flag(tr, TreeSection, "seed", "--seed", type=int)
     _set_flag(tr, "tree")
-    tr.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process")
-    tr.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
-    tr.add_argument("--no-progress", action="store_true", help="no progress bars")
+    _cluster_args(tr)
     tr.set_defaults(func=_cmd_tree)
 
     lb = sub.add_parser(
@@ -276,9 +279,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     lb.add_argument("store", help="run store after `hollowtree coarse` (and `hollowtree tree`)")
     lb.add_argument("--no-tree", action="store_true", help="label from the coarse segments even when the tree ran")
-    lb.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process")
-    lb.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
-    lb.add_argument("--no-progress", action="store_true", help="no progress bars")
+    _cluster_args(lb)
     lb.set_defaults(func=_cmd_labels)
 
     fe = sub.add_parser(
