@@ -19,7 +19,8 @@ FLOOR = {"ground": 0, "tiling": 1, "primitives": 1, "scenes": 2, "hollownet": 2,
 EDGE_MODULES = {"pipeline/cli.py", "pipeline/export.py", "pipeline/fuzz.py", "pipeline/graph.py",
                 "pipeline/hollownet_cmd.py",
                 "pipeline/workflow.py",
-                "scenes/synth.py", "tiling/readers.py", "tiling/store.py"}
+                "scenes/synth.py", "tiling/readers.py", "tiling/_points.py", "tiling/read_las.py",
+                "tiling/read_ply.py", "tiling/read_e57.py", "tiling/read_pdal.py", "tiling/store.py"}
 FORBIDDEN_IN_KERNELS = {"dask", "zarr", "laspy", "yaml"}
 
 

@@ -358,7 +358,7 @@ def test_e57_probe(e57_file):
 def test_e57_nonfinite_after_reading_is_dropped():
     """pye57 cannot write NaN into a valid record, so feed one to the block builder."""
     pytest.importorskip("pye57", reason="pye57 is not installed")
-    from hollowtree.tiling import readers
+    from hollowtree.tiling import read_e57 as readers
 
     scan = readers._Scan(header=None, count=3, coords=("cartesianX", "cartesianY", "cartesianZ"),
                          invalid=None, intensity=None, rgb_top=None, pose=None)
