@@ -102,15 +102,14 @@ def primitive_groups(store: RunStore) -> tuple[np.ndarray, int]:
     Returns ``(group_of, n_groups)``: ``group_of[g]`` for global segment ``g`` (index 0 is
     "no segment"), groups numbered 1..n_groups in order of their lowest global segment.
     """
-    from hollowtree.pipeline.coarse import _read_table
     from hollowtree.primitives.stitch import UnionFind
 
     n_seg = int(store.attrs["stages"]["coarse"]["n_segments"])
-    kinds = _read_table(store, "coarse/segments.parquet").column("kind").to_pylist()
+    kinds = store.read_table("coarse/segments.parquet").column("kind").to_pylist()
     keys: dict[tuple[int, str, str], int] = {}
     a_list, b_list = [], []
     for t in (int(t) for t in store.attrs["ingest"]["tiles"]):
-        table = _read_table(store, f"coarse/tables/{t}.parquet").to_pydict()
+        table = store.read_table(f"coarse/tables/{t}.parquet").to_pydict()
         arrays = store.read_unit(f"coarse/tiles/{t}", ["segment", "global"])
         has = arrays["global"] > 0
         if not has.any():

@@ -39,7 +39,6 @@ import pyarrow as pa
 
 from hollowtree.classes import PLANAR_CLASSES, ClassId
 from hollowtree.errors import ConfigError, PipelineError
-from hollowtree.pipeline.coarse import _read_table, _write_table
 from hollowtree.pipeline.graph import in_child
 from hollowtree.tiling.stage import Stage, params_hash
 from hollowtree.tiling.store import RunStore
@@ -234,7 +233,7 @@ def group_starts(store: RunStore) -> np.ndarray:
     """0-based row of the first segment of every element group, and the segment count
     last (``coarse/segments.parquet``'s ``group`` column; one group per segment in a
     store made before element groups)."""
-    t = _read_table(store, "coarse/segments.parquet")
+    t = store.read_table("coarse/segments.parquet")
     n = t.num_rows
     if "group" not in t.column_names or n == 0:
         return np.arange(n + 1, dtype=np.int64)
@@ -401,7 +400,7 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
                 cols[c] += group_cols[c]
         store.write_unit(f"tree/batches/{b}", out)
         _write_samples(store, b, xyz, out, params.seed, segs[0])
-    _write_table(store, f"tree/tables/{b}.parquet", pa.table(cols))
+    store.write_table(f"tree/tables/{b}.parquet", pa.table(cols))
     info = {"params_hash": cfg["params_hash"], "n_segments": segs[1] - segs[0], "n_points": n,
             "n_nodes": len(cols["segment"]), "n_instances": n_inst, "csr": [lo, hi]}
     store.record(STAGE, str(b), info)
@@ -430,7 +429,7 @@ def _ground_levels(store: RunStore) -> np.ndarray:
     store's coordinates, from the coarse segment table's bounding boxes."""
     from hollowtree.tree.ground import ground_levels
 
-    t = _read_table(store, "coarse/segments.parquet")
+    t = store.read_table("coarse/segments.parquet")
     cols = {c: np.asarray(t.column(c).to_numpy(), dtype=np.float64)
             for c in ("segment", "xmin", "ymin", "zmin", "xmax", "ymax", "zmax", "n_points")}
     order = np.argsort(cols["segment"], kind="stable")
@@ -488,7 +487,7 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any, device: str = "c
     if todo or not completed:
         tables = []
         for b in range(len(batches)):
-            t = _read_table(store, f"tree/tables/{b}.parquet")
+            t = store.read_table(f"tree/tables/{b}.parquet")
             inst = np.asarray(t.column("instance").to_numpy(), dtype=np.int64)
             t = t.set_column(t.schema.get_field_index("instance"), "instance",
                              pa.array(np.where(inst > 0, inst + inst_offsets[b], 0)))
@@ -505,7 +504,7 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any, device: str = "c
             cls[inst > 0] = np.where(cmap[inst[inst > 0]] > 0, cmap[inst[inst > 0]], cls[inst > 0])
             nodes = nodes.set_column(nodes.schema.get_field_index("class_id"), "class_id",
                                      pa.array(cls, type=nodes.schema.field("class_id").type))
-            _write_table(store, "tree/nodes.parquet", nodes)
+            store.write_table("tree/nodes.parquet", nodes)
         store.write_unit("tree/merge", {"instance_map": imap, "class_map": cmap})
     n_merged = int(np.count_nonzero(store.read_slice(MERGE_MAP) != np.arange(int(inst_offsets[-1]) + 1))) \
         if store.has(MERGE_MAP) else 0

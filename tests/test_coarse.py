@@ -499,7 +499,7 @@ def test_tile_tables_and_contacts_read_a_piece_at_a_time(scan, tmp_path, monkeyp
 def test_stitch_reads_a_piece_at_a_time(tiled20, tmp_path, monkeypatch):
     """The stitch reads tiles READ_ROWS rows at a time and matches buffer rows only to core
     rows near a tile's edge: the global ids, CSR and table equal those of whole tiles."""
-    import hollowtree.pipeline.coarse as coarse
+    import hollowtree.pipeline.coarse_stitch as coarse_stitch
 
     store_path = tmp_path / "s"
     shutil.copytree(tiled20[1], store_path)  # the shared store stays as it is
@@ -517,8 +517,8 @@ def test_stitch_reads_a_piece_at_a_time(tiled20, tmp_path, monkeypatch):
     params = CoarseParams.from_dict(s.attrs["stages"]["coarse"]["params"])
     whole = outputs()
     assert len(whole["indices"]) > 997  # type: ignore[arg-type]
-    monkeypatch.setattr(coarse, "READ_ROWS", 997)
-    coarse._stitch(s, tiles, params)
+    monkeypatch.setattr(coarse_stitch, "READ_ROWS", 997)
+    coarse_stitch.stitch(s, tiles, params)
     pieces = outputs()
     assert pieces.keys() == whole.keys()
     for k, v in whole.items():

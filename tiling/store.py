@@ -274,6 +274,42 @@ class RunStore:
         if self.has(path):
             del self._root[path]
 
+    # ------------------------------------------------------------------ tables
+    def _files(self) -> tuple[Any, str]:
+        import fsspec
+
+        fs, root = fsspec.core.url_to_fs(self.url)
+        return fs, root.rstrip("/")
+
+    def write_table(self, rel: str, table: Any) -> None:
+        """Write a ``pyarrow.Table`` as Parquet at ``<store>/<rel>`` (a segment or node table)."""
+        import pyarrow.parquet as pq
+
+        fs, root = self._files()
+        path = f"{root}/{rel}"
+        fs.makedirs(path.rsplit("/", 1)[0], exist_ok=True)
+        with fs.open(path, "wb") as f:
+            pq.write_table(table, f)
+
+    def read_table(self, rel: str) -> Any:
+        """The Parquet table at ``<store>/<rel>`` as a ``pyarrow.Table``."""
+        import pyarrow.parquet as pq
+
+        fs, root = self._files()
+        with fs.open(f"{root}/{rel}", "rb") as f:
+            return pq.read_table(f)
+
+    def has_file(self, rel: str) -> bool:
+        """Whether ``<store>/<rel>`` (a table or a folder of them) exists."""
+        fs, root = self._files()
+        return bool(fs.exists(f"{root}/{rel}"))
+
+    def delete_files(self, rel: str) -> None:
+        """Remove ``<store>/<rel>`` (a table or a folder of them) where it exists."""
+        fs, root = self._files()
+        if fs.exists(f"{root}/{rel}"):
+            fs.rm(f"{root}/{rel}", recursive=True)
+
     # ------------------------------------------------------------------ fragments
     def _fs(self) -> tuple[Any, str]:
         import fsspec
