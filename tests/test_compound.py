@@ -2,7 +2,7 @@
 
 The coarse stage joins a pavilion's dome, slab and columns into one element group
 (they touch), which HollowNet calls dome and no proposal splits; the tree cuts out its
-posts HollowNet calls pillars (``tree.sequences.posts``, ``tree.build.POSTS_FROM``), so
+posts HollowNet calls pillars (``tree.posts.posts``, ``tree.build.POSTS_FROM``), so
 each column is a pillar instance. Without that step the columns are part of the dome.
 """
 

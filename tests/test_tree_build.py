@@ -549,7 +549,8 @@ class _SlenderPillarElseDome:
 def test_posts_are_found_under_their_slab(floor):
     """Each post under the slab (on a platform or not) is one post, holding its own
     points; a slab, a ring of posts that touch and a solid block have none."""
-    from hollowtree.tree.sequences import SequenceParams, posts
+    from hollowtree.tree.posts import posts
+    from hollowtree.tree.sequences import SequenceParams
 
     xyz, part = _posts_under_a_slab(np.random.default_rng(0), floor=floor)
     found = posts(xyz)
@@ -572,7 +573,7 @@ def test_posts_are_found_under_their_slab(floor):
 def test_posts_are_found_above_a_slice_of_more_pieces():
     """Thirty tufts of grass around the platform make its slice the one with the most
     pieces; the posts still come from the slice that gives the most posts."""
-    from hollowtree.tree.sequences import posts
+    from hollowtree.tree.posts import posts
 
     rng = np.random.default_rng(4)
     xyz, part = _posts_under_a_slab(rng)
@@ -587,7 +588,7 @@ def test_posts_are_found_above_a_slice_of_more_pieces():
 def test_the_shafts_of_a_clustered_pillar_are_one_post():
     """Four shafts (0.5 m across, 0.14 m apart: touching at the posts' cells), two such
     pillars 3 m apart under a beam: two posts, each holding its four shafts."""
-    from hollowtree.tree.sequences import posts
+    from hollowtree.tree.posts import posts
 
     rng = np.random.default_rng(3)
     pieces = []

@@ -28,6 +28,7 @@ from hollowtree.classes import ELEMENT_CLASSES, ClassId
 from hollowtree.columns import column_max, column_min, column_span
 from hollowtree.tree.energy import Classifier, EnergyModel, energy_terms, load_energy_model
 from hollowtree.tree.operators import RngLike, h
+from hollowtree.tree.posts import posts
 from hollowtree.tree.sequences import (
     GAP_SEQUENCE,
     PART_SEQUENCE,
@@ -36,7 +37,6 @@ from hollowtree.tree.sequences import (
     SequenceParams,
     gaps,
     parts,
-    posts,
     propose,
 )
 from hollowtree.tree.split import N_PROBS, SplitModel, split_features
@@ -70,7 +70,7 @@ PART_MIN_HEIGHT = 2.0
 WHOLE_ROOT_CLASSES = (int(ClassId.DOME), int(ClassId.MINARET), int(ClassId.OTHER))
 
 #: A root HollowNet calls one of these that no proposal splits gives up its posts
-#: (:func:`tree.sequences.posts`) when HollowNet calls at least two of them pillars: a
+#: (:func:`tree.posts.posts`) when HollowNet calls at least two of them pillars: a
 #: pavilion's or a colonnade's columns under their slab or beam, which touch through it.
 #: Clutter keeps its posts (a scaffold's poles, people side by side), as it keeps its
 #: parts (:data:`WHOLE_ROOT_CLASSES`). Chosen on the validation split (docs/generalize.md).
@@ -373,7 +373,7 @@ def build_tree(
 
     def _split_posts(node: int, idx: IntArray, pts: FloatArray) -> bool:
         """A root of :data:`POSTS_FROM` that nothing split: the posts HollowNet calls
-        pillars each a child (:func:`tree.sequences.posts`), the rest of the root one."""
+        pillars each a child (:func:`tree.posts.posts`), the rest of the root one."""
         if depth[node] != 0 or cls[node] not in POSTS_FROM:
             return False
         found = posts(pts, params=params)
