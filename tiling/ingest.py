@@ -21,26 +21,28 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from hollowtree.columns import column_max, column_min
-from hollowtree.errors import ConfigError, CorruptInputError
+from hollowtree.errors import CorruptInputError
 from hollowtree.tiling.grid import TileGrid
+from hollowtree.tiling.ingest_plan import (
+    IngestParams,
+    IngestPlan,
+    MapUnit,
+    auto_tile_size,
+    plan_ingest,
+)
 from hollowtree.tiling.kernels import morton_index_order, quantise, route_groups, split_rows
 from hollowtree.tiling.readers import (
-    UNIT_METRES,
     PointBlock,
-    SourceInfo,
-    crs_units,
-    probe,
     read_blocks,
 )
-from hollowtree.tiling.stage import Stage, params_hash
+from hollowtree.tiling.stage import Stage
 from hollowtree.tiling.store import RunStore, StoreError, check_writable
 
 __all__ = [
@@ -64,9 +66,6 @@ MAP_STAGE = "ingest.map"
 SUBCELLS = 32
 #: Rows the reduce phase gathers, sorts and appends at a time (about 60 MB).
 FLUSH_ROWS = 1_000_000
-#: Coordinate resolution for inputs that store floats (PLY, E57): 0.1 mm.
-FLOAT_SOURCE_SCALE = 0.0001
-_INT32_MAX = 2**31 - 1
 _END = np.iinfo(np.int64).max  # sentinel key closing a fragment's group table
 #: Layout of the map phase's fragments; map records of another layout are redone.
 FRAGMENT_FORMAT = 3
@@ -75,326 +74,6 @@ FRAGMENT_FORMAT = 3
 #: tasks or in process) and returns the results in order.
 Runner = Callable[[Callable[..., Any], Sequence[tuple[Any, ...]], str], list[Any]]
 
-
-@dataclass(frozen=True, kw_only=True)
-class IngestParams:
-    """Parameters of an ingest; every one is recorded in the store.
-
-    Parameters
-    ----------
-    tile_size : float or None
-        Side of a tile's core, metres. None (the default, ``--tile-size auto``) picks the
-        side from the inputs' extent and point count so that an average tile holds about
-        ``tile_points`` points (a multiple of 5 m, at least 5 m; with ``voxel``, counting at
-        most the points the voxel grid can keep, :func:`auto_tile_size`).
-    tile_points : int
-        Target points per tile for the automatic tile size (default 2 000 000).
-    buffer : float
-        Width of the ring of neighbours' points copied into each tile, metres (default 2).
-    voxel : float or None
-        Keep one point per voxel of this size (metres); None keeps every point.
-    bbox : (xmin, ymin, xmax, ymax) or None
-        Ingest only the tiles whose core intersects this box (world coordinates).
-    tiles : tuple of int or None
-        Ingest only these tile ids.
-    chunk_size : int
-        Records per map unit (sets the map phase's memory: about 150 bytes per record).
-    units : float, str or None
-        Metres per coordinate unit of the inputs, or a unit's name
-        (:data:`tiling.readers.UNIT_METRES`: ``m``, ``ft``, ``us-ft``, ...). None (the
-        default) takes the linear unit of the inputs' CRS (metres where they have none).
-        The store holds metres: every length parameter (here and in later stages) is in
-        metres whatever the input's unit; the exported scan keeps the input's own
-        coordinates. ``bbox`` is in the inputs' coordinates.
-    """
-
-    tile_size: float | None = None
-    buffer: float = 2.0
-    voxel: float | None = None
-    bbox: tuple[float, float, float, float] | None = None
-    tiles: tuple[int, ...] | None = None
-    chunk_size: int = 1_000_000
-    tile_points: int = 2_000_000
-    units: float | str | None = None
-
-    def __post_init__(self) -> None:
-        def bad(name: str, rule: str, value: object) -> ConfigError:
-            return ConfigError(
-                f"The '{name}' parameter of ingest must be {rule}. Got {value!r} instead."
-            )
-
-        if self.tile_size is not None and not (
-            isinstance(self.tile_size, (int, float)) and math.isfinite(self.tile_size) and self.tile_size > 0
-        ):
-            raise bad("tile_size", "a float in the range (0.0, inf) or auto", self.tile_size)
-        limit = math.inf if self.tile_size is None else self.tile_size
-        if not (isinstance(self.buffer, (int, float)) and math.isfinite(self.buffer) and 0 <= self.buffer < limit):
-            raise bad("buffer", f"a float in the range [0.0, tile_size={limit})", self.buffer)
-        if not (isinstance(self.tile_points, int) and self.tile_points > 0):
-            raise bad("tile_points", "an int in the range [1, inf)", self.tile_points)
-        if self.voxel is not None and not (math.isfinite(self.voxel) and self.voxel > 0):
-            raise bad("voxel", "a float in the range (0.0, inf) or None", self.voxel)
-        if self.bbox is not None:
-            b = tuple(float(v) for v in self.bbox)
-            if len(b) != 4 or not all(math.isfinite(v) for v in b) or b[0] >= b[2] or b[1] >= b[3]:
-                raise bad("bbox", "(xmin, ymin, xmax, ymax) with xmin < xmax and ymin < ymax", self.bbox)
-            object.__setattr__(self, "bbox", b)
-        if self.tiles is not None:
-            t = tuple(int(v) for v in self.tiles)
-            if not t or min(t) < 0:
-                raise bad("tiles", "a non-empty list of tile ids >= 0", self.tiles)
-            object.__setattr__(self, "tiles", tuple(sorted(set(t))))
-        if not (isinstance(self.chunk_size, int) and self.chunk_size > 0):
-            raise bad("chunk_size", "an int in the range [1, inf)", self.chunk_size)
-        if isinstance(self.units, str):
-            if self.units.lower() not in UNIT_METRES:
-                raise bad("units", f"metres per coordinate unit or one of {sorted(UNIT_METRES)}", self.units)
-            object.__setattr__(self, "units", UNIT_METRES[self.units.lower()])
-        elif self.units is not None and (isinstance(self.units, bool) or not isinstance(self.units, (int, float))
-                                         or not (math.isfinite(self.units) and self.units > 0)):
-            raise bad("units", f"metres per coordinate unit (> 0) or one of {sorted(UNIT_METRES)}", self.units)
-        elif self.units is not None:
-            object.__setattr__(self, "units", float(self.units))
-
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["bbox"] = list(self.bbox) if self.bbox is not None else None
-        d["tiles"] = list(self.tiles) if self.tiles is not None else None
-        if self.units is None:  # as stores made before the key recorded it
-            del d["units"]
-        return d
-
-    @classmethod
-    def from_workflow(cls, ip: Any) -> IngestParams:
-        """From a workflow's ``ingest`` section (``pipeline.workflow.IngestSection``), which
-        declares every key's default and constraints."""
-        return cls(tile_size=ip.tile_size, tile_points=ip.tile_points, buffer=ip.buffer, voxel=ip.voxel,
-                   bbox=tuple(ip.bbox) if ip.bbox is not None else None,
-                   tiles=tuple(ip.tiles) if ip.tiles is not None else None, chunk_size=ip.chunk_size, units=ip.units)
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> IngestParams:
-        d = dict(data)
-        if d.get("bbox") is not None:
-            d["bbox"] = tuple(d["bbox"])
-        if d.get("tiles") is not None:
-            d["tiles"] = tuple(d["tiles"])
-        return cls(**d)
-
-
-@dataclass(frozen=True, kw_only=True)
-class MapUnit:
-    """One map task: records ``[start, stop)`` of source ``source``."""
-
-    map_id: int
-    source: int
-    path: str
-    base: int  # global index of the source's first record
-    start: int
-    stop: int
-
-
-@dataclass(frozen=True, kw_only=True)
-class IngestPlan:
-    """Everything the tasks need, fixed before any of them runs."""
-
-    sources: tuple[SourceInfo, ...]
-    grid: TileGrid
-    scale: tuple[float, float, float]
-    offset: tuple[float, float, float]
-    tiles: tuple[int, ...]
-    fields: dict[str, list[Any]]  # name -> [dtype str, trailing shape]
-    params: IngestParams
-    units: tuple[MapUnit, ...] = field(repr=False)
-    params_hash: str = ""
-    #: metres per input coordinate unit along x, y, z, and where that came from
-    metres_per_unit: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    unit_name: str = "metre (no CRS)"
-
-    def attrs(self) -> dict[str, Any]:
-        """The root attributes that describe this ingest."""
-        return {
-            "sources": [s.to_dict() for s in self.sources],
-            "grid": self.grid.to_dict(),
-            "coords": {"dtype": "int32", "scale": list(self.scale), "offset": list(self.offset),
-                       # only where they are not metres: the identity of a store made before
-                       **({"metres_per_unit": list(self.metres_per_unit), "unit": self.unit_name}
-                          if self.metres_per_unit != (1.0, 1.0, 1.0) else {})},
-            "fields": self.fields,
-            "ingest": {"params": self.params.to_dict(), "params_hash": self.params_hash,
-                       "tiles": list(self.tiles)},
-        }
-
-
-#: For the automatic tile size with a voxel: a scan keeps at most about this many times its
-#: x-y footprint's area in surfaces (ground, walls, roofs) of one point per voxel face. It
-#: bounds the points a voxel grid keeps, so a very dense scan does not get tiles far
-#: smaller than its kept points need; it sets only the tile size, never a label.
-SURFACE_PER_FOOTPRINT = 2.0
-
-
-def auto_tile_size(width: float, depth: float, n_points: int, *, tile_points: int, buffer: float,
-                   voxel: float | None = None) -> float:
-    """Tile side (metres) for which an average tile holds about ``tile_points`` points.
-
-    A multiple of 5 m, at least 5 m and more than twice the buffer. With ``voxel`` the
-    points counted are at most those the voxel grid can keep
-    (``SURFACE_PER_FOOTPRINT * area / voxel**2``).
-
-    Examples
-    --------
-    >>> auto_tile_size(140.0, 100.0, 10_000_000, tile_points=2_000_000, buffer=2.0)
-    55.0
-    >>> auto_tile_size(140.0, 100.0, 100_000_000, tile_points=2_000_000, buffer=2.0)
-    20.0
-    >>> auto_tile_size(140.0, 100.0, 1_000_000_000, tile_points=2_000_000, buffer=2.0)
-    10.0
-    >>> auto_tile_size(140.0, 100.0, 1_000_000_000, tile_points=2_000_000, buffer=2.0, voxel=0.02)
-    20.0
-    """
-    area = max(width, 1.0) * max(depth, 1.0)
-    if voxel:
-        n_points = min(n_points, int(SURFACE_PER_FOOTPRINT * area / voxel**2))
-    side = math.sqrt(area * tile_points / max(n_points, 1))
-    side = max(5.0, 5.0 * math.ceil(side / 5.0))
-    while side <= 2 * buffer:
-        side += 5.0
-    return side
-
-
-def _source_bounds(info: SourceInfo, chunk_size: int) -> tuple[np.ndarray, np.ndarray]:
-    if info.mins is not None and info.maxs is not None:
-        return np.asarray(info.mins, float), np.asarray(info.maxs, float)
-    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-    for block in read_blocks(info.path, chunk_size=chunk_size):
-        if len(block.xyz):
-            lo = np.minimum(lo, column_min(block.xyz))
-            hi = np.maximum(hi, column_max(block.xyz))
-    return lo, hi
-
-
-def _fields(sources: Sequence[SourceInfo]) -> dict[str, list[Any]]:
-    """Per-point fields of the store: those any source has, with their dtypes."""
-    out: dict[str, list[Any]] = {}
-    if any(s.has_intensity for s in sources):
-        out["intensity"] = ["uint16", []]
-    if any(s.has_rgb for s in sources):
-        out["rgb"] = ["uint16", [3]]
-    if any(s.has_returns for s in sources):
-        out["return_number"] = ["uint8", []]
-        out["number_of_returns"] = ["uint8", []]
-    if any(s.has_gps_time for s in sources):
-        out["gps_time"] = ["float64", []]
-    for s in sources:
-        if not s.extra_dims:
-            continue
-        block = next(iter(read_blocks(s.path, chunk_size=1, stop=1)), None)
-        if block is None:
-            continue
-        for name, values in block.extra.items():
-            key = f"extra.{name}"
-            if key not in out:
-                out[key] = [np.asarray(values).dtype.str, list(np.asarray(values).shape[1:])]
-    return out
-
-
-def _metres_per_unit(sources: Sequence[SourceInfo], params: IngestParams) -> tuple[np.ndarray, str]:
-    """Metres per input coordinate unit (x, y, z) and its description: ``params.units``,
-    else the inputs' CRS (their CRSs are one, checked before), else metres."""
-    if params.units is not None:
-        return np.full(3, float(params.units)), f"{params.units:g} m per unit (ingest.units)"
-    wkt = next((s.crs_wkt for s in sources if s.crs_wkt), None)
-    found = crs_units(wkt, next((s.path for s in sources if s.crs_wkt), ""))
-    if found is None:
-        return np.ones(3), "metre (no CRS)" if wkt is None else "metre (the CRS names no linear unit)"
-    f, name = found
-    return np.asarray(f, float), f"{name} ({f[0]:g} m, from the CRS)"
-
-
-def plan_ingest(inputs: Sequence[str | Path], params: IngestParams) -> IngestPlan:
-    """Probe the inputs and fix the grid, the coordinate grid and the map units.
-
-    Raises
-    ------
-    ConfigError, InputFileError, CorruptInputError, UnsupportedInputError
-        On a bad input or parameter; nothing has been written then.
-    """
-    if not inputs:
-        raise ConfigError("ingest needs at least one input file")
-    sources = tuple(probe(p) for p in inputs)
-    crs = {s.crs_wkt for s in sources if s.crs_wkt}
-    if len(crs) > 1:
-        named = ", ".join(Path(s.path).name for s in sources if s.crs_wkt)
-        raise ConfigError(f"inputs {named} have different coordinate reference systems; reproject them to one first")
-    for s in sources:
-        if s.point_count == 0:
-            raise CorruptInputError(f"{s.path}: holds no points")
-    f, unit_name = _metres_per_unit(sources, params)
-    bounds = [_source_bounds(s, params.chunk_size) for s in sources]
-    lo = np.min([b[0] for b in bounds], axis=0) * f
-    hi = np.max([b[1] for b in bounds], axis=0) * f
-    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
-        raise CorruptInputError(f"{sources[0].path}: no finite coordinates in the inputs")
-    tile_size = params.tile_size
-    if tile_size is None:
-        tile_size = auto_tile_size(
-            float(hi[0] - lo[0]), float(hi[1] - lo[1]), sum(s.point_count for s in sources),
-            tile_points=params.tile_points, buffer=params.buffer, voxel=params.voxel,
-        )
-    grid = TileGrid.covering(lo[0], lo[1], hi[0], hi[1], tile_size=tile_size, buffer=params.buffer)
-
-    las = [s for s in sources if s.scale is not None]
-    scale = np.full(3, FLOAT_SOURCE_SCALE)
-    if las:  # the inputs' own integer grid, in metres
-        scale = np.min([np.asarray(s.scale, float) for s in las], axis=0) * f
-        if any(s.scale is None for s in sources):
-            scale = np.minimum(scale, FLOAT_SOURCE_SCALE)
-    if las and las[0].offset is not None:
-        offset = np.asarray(las[0].offset, float) * f
-    else:
-        offset = np.floor(lo)
-    span = np.maximum(np.abs(hi - offset), np.abs(lo - offset)) / scale
-    if np.any(span > _INT32_MAX):
-        raise ConfigError(
-            f"the inputs span {hi - lo} m: too large for int32 coordinates at scale {scale.tolist()}"
-        )
-
-    all_tiles = np.arange(grid.n_tiles)
-    if params.tiles is not None:
-        if max(params.tiles) >= grid.n_tiles:
-            raise ConfigError(
-                f"tile {max(params.tiles)} does not exist: the grid has {grid.n_tiles} tiles (0-{grid.n_tiles - 1})"
-            )
-        all_tiles = np.asarray(params.tiles)
-    if params.bbox is not None:
-        xmin, ymin, xmax, ymax = (v * f[i % 2] for i, v in enumerate(params.bbox))
-        keep = []
-        for t in all_tiles:
-            x0, y0, x1, y1 = grid.core_bounds(int(t))
-            if x0 < xmax and xmin < x1 and y0 < ymax and ymin < y1:
-                keep.append(int(t))
-        if not keep:
-            raise ConfigError(f"bbox {list(params.bbox)} meets no tile of the inputs' extent {lo[:2].tolist()}-{hi[:2].tolist()}")
-        all_tiles = np.asarray(keep)
-
-    units = []
-    base = 0
-    for i, s in enumerate(sources):
-        for start in range(0, s.point_count, params.chunk_size):
-            units.append(MapUnit(map_id=len(units), source=i, path=s.path, base=base, start=start,
-                                 stop=min(start + params.chunk_size, s.point_count)))
-        base += s.point_count
-    plan = IngestPlan(
-        sources=sources, grid=grid, scale=tuple(scale.tolist()), offset=tuple(offset.tolist()),
-        tiles=tuple(int(t) for t in all_tiles), fields=_fields(sources), params=params,
-        units=tuple(units), metres_per_unit=tuple(float(v) for v in f), unit_name=unit_name,
-    )
-    identity = {k: v for k, v in plan.attrs().items() if k != "ingest"}
-    identity["params"] = params.to_dict()
-    identity["sources"] = [
-        {"path": str(Path(s.path).resolve()), "size": s.size_bytes, "points": s.point_count} for s in sources
-    ]
-    return IngestPlan(**{**plan.__dict__, "params_hash": params_hash(identity)})
 
 
 def _row_dtype(fields: dict[str, list[Any]], voxel: bool) -> np.dtype:
