@@ -16,6 +16,20 @@ from pathlib import Path
 from typing import Any
 
 from hollowtree.errors import PipelineError
+from hollowtree.pipeline.cli_args import (
+    _bbox,
+    _cluster_args,
+    _float,
+    _int_list,
+    _non_negative,
+    _nonnegative_int,
+    _positive_int,
+    _section,
+    _set_flag,
+    _stage_flag,
+    _tile_size,
+    _units,
+)
 
 __all__ = ["main", "build_parser"]
 
@@ -64,85 +78,20 @@ def _synth_description() -> str:
     )
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text.replace("_", ""))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"must be a positive integer; got {value}")
-    return value
 
 
-def _nonnegative_int(text: str) -> int:
-    return 0 if text.strip() == "0" else _positive_int(text)
 
 
-def _float(text: str) -> float:
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
 
 
-def _non_negative(text: str) -> float:
-    value = _float(text)
-    if not value >= 0:
-        raise argparse.ArgumentTypeError(f"must be a non-negative number; got {text}")
-    return value
 
 
-def _stage_flag(parser: argparse.ArgumentParser, section: Any, key: str, *names: str, **kwargs: Any) -> None:
-    """A flag for the workflow key ``key`` of ``section`` (``pipeline.workflow``): its help
-    and its default are the section's (one declaration); not given = the section's default."""
-    field = section.model_fields[key]
-    text = (field.description or "").replace("%", "%%")
-    if field.default is not None and not isinstance(field.default, (bool, list)):
-        d = field.default
-        text += f" (default {d:,})" if isinstance(d, int) else f" (default {d:g})" if isinstance(d, float) else f" (default {d})"
-    parser.add_argument(*names, dest=key, default=None, help=text, **kwargs)
 
 
-def _cluster_args(parser: argparse.ArgumentParser) -> None:
-    """Where a step command's tasks run, and its progress bars."""
-    parser.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process")
-    parser.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
-def _set_flag(parser: argparse.ArgumentParser, stage: str) -> None:
-    parser.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
-                        help=f"any key of the workflow's {stage} section (docs/workflows.md), the value read as "
-                             f"YAML; repeatable")
 
 
-def _section(section: Any, args: argparse.Namespace, stage: str, extra: dict[str, Any] | None = None) -> Any:
-    """The workflow section ``section`` from the flags given and ``--set KEY=VALUE``,
-    validated by the section itself (one line, exit 2, when a value is wrong)."""
-    import yaml
-    from pydantic import ValidationError
-
-    from hollowtree.errors import ConfigError
-
-    values = {k: getattr(args, k) for k in section.model_fields if getattr(args, k, None) is not None}
-    values.update(extra or {})
-    for item in args.sets:
-        key, sep, text = item.partition("=")
-        key = key.strip().removeprefix(f"{stage}.")
-        if not sep or key not in section.model_fields:
-            raise ConfigError(f"--set {item}: expected KEY=VALUE with KEY a key of the workflow's {stage} section "
-                              f"({', '.join(section.model_fields)})")
-        try:
-            values[key] = yaml.safe_load(text)
-        except yaml.YAMLError:
-            raise ConfigError(f"--set {item}: the value is not YAML") from None
-    try:
-        return section(**values)
-    except ValidationError as exc:
-        err = exc.errors()[0]
-        where = ".".join(str(x) for x in err["loc"])
-        got = f" (got {err['input']!r})" if "input" in err and not isinstance(err["input"], dict) else ""
-        raise ConfigError(f"{stage}.{where}: {err['msg']}{got}") from None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -638,23 +587,10 @@ def _cmd_coarse(args: argparse.Namespace) -> int:
     return 0
 
 
-def _tile_size(text: str) -> float | None:
-    return None if text.strip().lower() == "auto" else _float(text)
 
 
-def _bbox(text: str) -> tuple[float, float, float, float]:
-    parts = text.split(",")
-    if len(parts) != 4:
-        raise argparse.ArgumentTypeError(f"expected XMIN,YMIN,XMAX,YMAX; got {text!r}")
-    vals = tuple(_float(p) for p in parts)
-    return vals  # type: ignore[return-value]
 
 
-def _int_list(text: str) -> tuple[int, ...]:
-    try:
-        return tuple(int(p) for p in text.split(",") if p.strip())
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected tile ids like 0,1,5; got {text!r}") from None
 
 
 def _cmd_ingest(args: argparse.Namespace) -> int:
@@ -684,14 +620,6 @@ def _cmd_ingest(args: argparse.Namespace) -> int:
     return 0
 
 
-def _units(text: str | None) -> float | str | None:
-    """``--units``: a number (metres per unit) or a unit's name, as ``IngestParams`` takes it."""
-    if text is None:
-        return None
-    try:
-        return float(text)
-    except ValueError:
-        return text
 
 
 def _cmd_synth(args: argparse.Namespace) -> int:

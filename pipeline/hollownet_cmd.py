@@ -23,7 +23,7 @@ import numpy as np
 import yaml
 
 from hollowtree.errors import ConfigError, InputFileError, PipelineError
-from hollowtree.pipeline.cli import _positive_int
+from hollowtree.pipeline.cli_args import _positive_int
 
 __all__ = ["add_labelled_args", "add_parsers", "class_map_of", "cmd_classify", "cmd_train", "procedural_samples",
            "read_labelled"]
