@@ -1,0 +1,382 @@
+"""The generated tables of the docs: from ``benchmarks/results/*.json`` and the workflow schema.
+
+A generated table sits in a Markdown file between two comments::
+
+    <!-- generated: NAME -->
+    ... (rewritten by this script; do not edit by hand)
+    <!-- end generated -->
+
+``NAME`` is a key of :data:`GENERATORS`. The script reads README.md and every ``.md``
+under ``docs/``, replaces the text between each pair with what the generator gives now,
+and writes the files that changed. With ``--check`` it writes nothing, names every block
+that is out of date and exits 1 (``tests/test_docs_generated.py`` runs it).
+
+Run: ``python benchmarks/report.py [--check]``. When a newer run is checked in under
+``benchmarks/results/``, name its file in :data:`LATEST` (or let the globbed tables pick it
+up) and run the script again.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+from collections import Counter
+from collections.abc import Callable
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+RESULTS = REPO / "benchmarks" / "results"
+
+#: The latest run of each kind of element-recall result (``bench_generalize.py --json``).
+#: These are the figures of docs/generalize.md; edit the file names when a newer run replaces one.
+LATEST = {
+    "test": "generalize-test-forts-tree-v21.json",
+    "test-5m": "generalize-test-5m-forts-tree-v21.json",
+    "val-4m": "generalize-val-4m-forts-tree-v21.json",
+    "val-1m": "generalize-val-density-1m-forts-tree-v21.json",
+    "val-10m": "generalize-val-density-10m-tree-v21.json",
+    # the latest run with the paper's energy path (later runs passed --no-energy)
+    "test-energy": "generalize-test.json",
+}
+
+#: What each validation variant of docs/decisions/method.md was (``generalize-val-4m*.json``).
+VAL_VARIANTS = {
+    "generalize-val-4m.json": "`tree-v16` (the baseline)",
+    "generalize-val-4m-tree-v17.json": "`tree-v17`: groups called dome or pillar give up their pillar segments",
+    "generalize-val-4m-posts-from-clutter.json": "posts from roots called dome, pillar or other",
+    "generalize-val-4m-posts-and-peel.json": "`tree-v17`'s rule kept beside the posts",
+    "generalize-val-4m-tree-v18.json": "`tree-v18`: roots called dome or pillar give up their posts",
+    "generalize-val-4m-tree-v19.json": "`tree-v19`: posts from the slice that gives the most",
+    "generalize-val-4m-tree-v20.json": "`tree-v20`: the rest of a posts split cut into its parts",
+    "generalize-val-4m-posts-from-domes.json": "rejected: posts from roots called dome only",
+    "generalize-val-4m-three-posts.json": "rejected: at least three posts called pillar",
+    "generalize-val-4m-hn-p28.json": "rejected: HollowNet trained with 28 procedural training sites",
+    "generalize-val-4m-no-other-max-base.json": "rejected: without `tree.other_max_base`",
+    "generalize-val-4m-tree-v21.json": "`tree-v21`: a minaret node's storeys cut judged by its bays",
+    "generalize-val-4m-forts-tree-v20.json": "`tree-v20`, forts with bastions along their walls",
+    "generalize-val-4m-forts-tree-v21.json": "`tree-v21`, forts with bastions along their walls",
+}
+
+ELEMENTS = ("arch", "dome", "minaret", "pillar")
+BEGIN = re.compile(r"<!-- generated: ([\w.-]+) -->\n")
+END = "<!-- end generated -->"
+
+
+def _load(name: str) -> dict:
+    return json.loads((RESULTS / name).read_text())
+
+
+def _pct(a: float, b: float) -> str:
+    return f"{100 * a / b:.1f} %" if b else "NA"
+
+
+def _n(x: int) -> str:
+    """An integer with thin groups of three: 1 000 066."""
+    return f"{x:,}".replace(",", " ")
+
+
+def _mega(n: float) -> str:
+    return f"{n / 1e6:g} M"
+
+
+def _sum(counts: dict[str, dict[str, int]], key: str) -> int:
+    return sum(counts[c][key] for c in ELEMENTS if c in counts)
+
+
+def _found(counts: dict[str, dict[str, int]]) -> tuple[int, int, int, int]:
+    return _sum(counts, "found"), _sum(counts, "gt"), _sum(counts, "matched"), _sum(counts, "pred")
+
+
+def _points(d: dict) -> str:
+    lo, hi = d["points"]
+    return _mega(lo) if lo == hi else f"{_mega(lo)[:-2]}-{_mega(hi)}"
+
+
+def _seeds(d: dict) -> str:
+    s = d["seeds"]
+    return f"{len(s)} ({_n(s[0])}-{_n(s[-1])})"
+
+
+# --- docs/generalize.md ------------------------------------------------------------------
+
+def generalize_figures() -> str:
+    """The headline of issue 43: found and precision per split and density."""
+    rows = [("test", "test split"), ("test-5m", "test split, 5 M points"),
+            ("val-4m", "validation, 4 M points"), ("val-1m", "validation, 1 M points"),
+            ("val-10m", "validation, 10 M points")]
+    out = ["| sites | seeds | points per site | tree | arch | dome | minaret | pillar | all found | precision | source |",
+           "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for key, label in rows:
+        d = _load(LATEST[key])
+        t = d["totals"]["tree"]
+        fd, gt, m, p = _found(t)
+        per = [f"{t[c]['found']} / {t[c]['gt']}" for c in ELEMENTS]
+        out.append(f"| {label} | {_seeds(d)} | {_points(d)} | `{d['tree_algorithm']}` | " + " | ".join(per)
+                   + f" | **{fd} / {gt} ({_pct(fd, gt)})** | **{_pct(m, p)}** | `{LATEST[key]}` |")
+    return "\n".join(out)
+
+
+# --- docs/benchmarks.md ------------------------------------------------------------------
+
+def generalize_test() -> str:
+    """Per class: the default, the paper's energy and the coarse segments on the test split."""
+    d, e = _load(LATEST["test"]), _load(LATEST["test-energy"])
+    rows = [("default (split model)", d["totals"]["tree"], d, LATEST["test"]),
+            ("coarse segments, each classified whole", d["totals"]["ransac+dbscan"], d, LATEST["test"]),
+            ("paper's energy", e["totals"]["energy"], e, LATEST["test-energy"])]
+    out = ["| method | tree | arch | dome | minaret | pillar | all | precision | source |",
+           "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for name, t, src, f in rows:
+        fd, gt, m, p = _found(t)
+        per = [f"{t[c]['found']} / {t[c]['gt']}" for c in ELEMENTS]
+        out.append(f"| {name} | `{src.get('tree_algorithm', '?')}` | " + " | ".join(per)
+                   + f" | {fd} / {gt} ({_pct(fd, gt)}) | {_pct(m, p)} | `{f}` |")
+    fams = []
+    for fam, v in d["families"].items():
+        fd, gt, _, _ = _found(v["tree"])
+        fams.append((fd / gt if gt else 0, f"{fam.replace('_', ' ')} {fd} / {gt} ({_pct(fd, gt)})"))
+    out += ["", "Per family (default): " + ", ".join(s for _, s in sorted(fams, reverse=True)) + "."]
+    out += ["", "| class | elements | median points | under 200 | under 1 000 |", "| --- | --- | --- | --- | --- |"]
+    for c, v in d.get("visibility", {}).items():
+        out.append(f"| {c} | {v['elements']} | {_n(v['median_points'])} | {v['under_200']} | {v['under_1000']} |")
+    return "\n".join(out)
+
+
+def small() -> str:
+    d = _load("small.json")
+    out = ["| scan | points | cluster | in process | cluster / in process |", "| --- | ---: | ---: | ---: | ---: |"]
+    for r in d["rows"]:
+        out.append(f"| `{r['scan']}` | {_n(r['points'])} | {r['cluster_s']:.1f} s | {r['in_process_s']:.1f} s | "
+                   f"{r['cluster_over_in_process']:.2f} |")
+    return "\n".join(out)
+
+
+def scale_workers() -> str:
+    d = _load("scale-workers-20m.json")
+    runs = sorted(d["results"], key=lambda r: r["workers"])
+    cols = [f"{r['workers']} worker{'s' if r['workers'] > 1 else ''}" for r in runs]
+    p = [r["projection"] for r in runs]
+
+    def row(name: str, f: Callable[[dict, dict], str]) -> str:
+        return f"| {name} | " + " | ".join(f(r, q) for r, q in zip(runs, p, strict=True)) + " |"
+
+    out = [f"| {_n(runs[0]['points'])} points, {d['cpu']}, {d['cores']} cores | " + " | ".join(cols) + " |",
+           "| --- |" + " --- |" * len(runs),
+           row("measured wall", lambda r, q: f"{r['wall_s']:.1f} s"),
+           row("predicted from its own units, 1 / 2 / 16 workers",
+               lambda r, q: " / ".join(f"{q['predicted_s'][k]:.1f}" for k in ("1", "2", "16")) + " s"),
+           row("unit seconds, all units", lambda r, q: f"{sum(w['unit_s'] for w in q['waves']):.1f} s"),
+           row("driver alone / starts and new workers",
+               lambda r, q: f"{sum(q['driver_s'].values()):.1f} / {q['other_s']:.1f} s"),
+           row(f"{p[0]['target_points'] / 1e9:.2f} B points on 64 workers (units repeated)",
+               lambda r, q: f"{q['target_64_workers_s'] / 60:.1f} min"),
+           row("peak process", lambda r, q: "{:.0f} MB ({})".format(
+               *max((s["peak_process"] / 1e6, s["stage"]) for s in r["stages"])))]
+    one = {r["workers"]: r for r in runs}
+    lom = p[0]["largest_over_median_points"]
+    out += ["", f"1 worker over 2: **{one[1]['wall_s'] / one[2]['wall_s']:.2f}**; predicted 16 over 2 "
+            f"(2-worker run): **{one[2]['projection']['speedup_16_over_2']:.2f}**; largest over median unit in "
+            "points: " + ", ".join(f"{k} {v:.1f}x" for k, v in lom.items() if v and v > 1.5) + "."]
+    return "\n".join(out)
+
+
+def fuzz() -> str:
+    d = _load("fuzz.json")
+    kinds: dict[str, Counter] = {}
+    for o in d["outcomes"]:
+        k = kinds.setdefault(o["spec"].split()[0], Counter())
+        k["scans"] += 1
+        k["points"] += o.get("n_points") or 0
+        k[o["status"]] += 1
+    statuses = sorted({s for k in kinds.values() for s in k} - {"scans", "points"})
+    out = ["| kind | scans | points | " + " | ".join(statuses) + " |", "| --- | ---: | ---: |" + " ---: |" * len(statuses)]
+    for name, k in sorted(kinds.items(), key=lambda kv: -kv[1]["scans"]):
+        out.append(f"| {name} | {k['scans']} | {_n(k['points'])} | " + " | ".join(str(k[s]) for s in statuses) + " |")
+    out += ["", f"{d['scans']} scans, seed {d['seed']}, at most {_n(d['max_points'])} points each: "
+            f"**{d['bugs']} bugs** ({d['seconds']:.0f} s; `fuzz.json`)."]
+    return "\n".join(out)
+
+
+# --- docs/results.md ---------------------------------------------------------------------
+
+def derawar() -> str:
+    """The paper's Derawar at 1 M points per tree version (``hollowtree evaluate --json``)."""
+    out = ["| tree | ransac | ransac+dbscan | tree | tree - ransac+dbscan | bastions found (of GT) | predicted | precision | source |",
+           "| --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | --- |"]
+    for f in sorted(RESULTS.glob("derawar-1m-*.json")):
+        d = json.loads(f.read_text())
+        s = d["sites"][0]
+        m = {k: v["mean_iou_pct"] for k, v in s["methods"].items()}
+        c = s["methods"]["tree"]["classes"]["minaret"]
+        label = f.stem.removeprefix("derawar-1m-")
+        out.append(f"| `{label}` | {m['ransac']:.1f} | {m['ransac+dbscan']:.1f} | {m['tree']:.1f} | "
+                   f"{m['tree'] - m['ransac+dbscan']:+.1f} | {c['n_found']} / {c['n_gt']} ({c['accuracy_pct']:.1f} %) | "
+                   f"{c['n_pred']} | {c['precision_pct']:.1f} % | `{f.name}` |")
+    return "\n".join(out)
+
+
+# --- docs/decisions/method.md ------------------------------------------------------------
+
+def val_history() -> str:
+    """Every validation variant at 4 M points (14 sites): what was tried on the way to the tree."""
+    out = ["| variant | label run | arch | dome | minaret | pillar | found | precision | F1 | file |",
+           "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for name, what in VAL_VARIANTS.items():
+        d = _load(name)
+        t = d["totals"]["tree"]
+        fd, gt, m, p = _found(t)
+        r, pr = fd / gt, m / p
+        f1 = 2 * r * pr / (r + pr)
+        per = [str(t[c]["found"]) for c in ELEMENTS]
+        over = "".join(f" (`{re.sub(r'=/.*/', '=', o)}`)" for o in d.get("overrides", []))
+        out.append(f"| {what}{over} | `{d.get('tree_algorithm', '?')}` | " + " | ".join(per)
+                   + f" | {fd} / {gt} | {100 * pr:.1f} % | {f1:.3f} | `{name}` |")
+    return "\n".join(out)
+
+
+# --- docs/workflows.md -------------------------------------------------------------------
+
+def _resolve(schema: dict, node: dict) -> dict:
+    while "$ref" in node:
+        node = schema["$defs"][node["$ref"].split("/")[-1]]
+    return node
+
+
+def _type(schema: dict, node: dict) -> tuple[str, list[str]]:
+    """A field's type in words and its constraints."""
+    if "anyOf" in node:
+        parts = [_type(schema, n) for n in node["anyOf"]]
+        types = [t for t, _ in parts if t != "null"]
+        cons = [c for _, cs in parts for c in cs]
+        return " or ".join(types) + (" or null" if len(types) < len(parts) else ""), cons
+    if "$ref" in node:
+        return "section", []
+    cons = []
+    for key, op in (("minimum", ">="), ("exclusiveMinimum", ">"), ("maximum", "<="), ("exclusiveMaximum", "<")):
+        if key in node:
+            cons.append(f"{op} {node[key]:g}")
+    if "const" in node:
+        cons.append(f"= {json.dumps(node['const'])}")
+    if "enum" in node:
+        return " \\| ".join(f"`{v}`" for v in node["enum"]), cons
+    t = node.get("type", "any")
+    if t == "array":
+        if "prefixItems" in node:
+            inner = [_type(schema, n)[0] for n in node["prefixItems"]]
+            return f"[{', '.join(inner)}]", cons
+        inner, icons = _type(schema, node.get("items", {}))
+        return f"list of {inner}", cons + [f"each {c}" for c in icons]
+    if t == "object" and "additionalProperties" in node and isinstance(node["additionalProperties"], dict):
+        return f"map of {_type(schema, node['additionalProperties'])[0]}", cons
+    return {"integer": "int", "number": "float", "string": "str", "boolean": "bool"}.get(t, t), cons
+
+
+def _default(node: dict, required: bool) -> str:
+    if required:
+        return "required"
+    if "default" not in node:
+        t = node.get("type")
+        return "`[]`" if t == "array" else "`{}`" if t == "object" else "-"
+    v = node["default"]
+    return "`" + (v if isinstance(v, str) else json.dumps(v)) + "`"
+
+
+def _clean(text: str) -> str:
+    return " ".join(text.replace("``", "`").split()).replace("|", "\\|")
+
+
+def workflow_keys() -> str:
+    """Every key of a workflow file, from the pydantic model's JSON schema."""
+    sys.path.insert(0, str(REPO))
+    from hollowtree.pipeline.workflow import Workflow
+
+    schema = Workflow.model_json_schema()
+    out = ["| key | type | default | constraints | meaning |", "| --- | --- | --- | --- | --- |"]
+
+    def walk(node: dict, prefix: str) -> None:
+        node = _resolve(schema, node)
+        required = set(node.get("required", ()))
+        for name, field in node.get("properties", {}).items():
+            key = prefix + name
+            sub = next((n for n in [field, *field.get("anyOf", ())] if "$ref" in n), None)
+            if sub is not None:
+                section = _resolve(schema, sub)
+                desc = section.get("description", "") or field.get("description", "")
+                opt = "section or null" if "anyOf" in field else "section"
+                out.append(f"| `{key}` | {opt} | {'required' if name in required else ''} | | {_clean(desc)} |")
+                walk(sub, key + ".")
+                continue
+            t, cons = _type(schema, field)
+            out.append(f"| `{key}` | {t} | {_default(field, name in required)} | {', '.join(cons)} | "
+                       f"{_clean(field.get('description', ''))} |")
+
+    walk(schema, "")
+    return "\n".join(out)
+
+
+GENERATORS: dict[str, Callable[[], str]] = {
+    "generalize-figures": generalize_figures,
+    "generalize-test": generalize_test,
+    "small": small,
+    "scale-workers": scale_workers,
+    "fuzz": fuzz,
+    "derawar": derawar,
+    "val-history": val_history,
+    "workflow-keys": workflow_keys,
+}
+
+
+def doc_files() -> list[Path]:
+    return [REPO / "README.md", *sorted((REPO / "docs").rglob("*.md"))]
+
+
+def render(text: str, cache: dict[str, str], where: str = "") -> str:
+    """``text`` with every generated block rewritten."""
+    out, pos = [], 0
+    for m in BEGIN.finditer(text):
+        if m.start() < pos:
+            continue
+        end = text.find(END, m.end())
+        if end < 0:
+            raise SystemExit(f"{where}: '{m.group(0).strip()}' has no '{END}'")
+        name = m.group(1)
+        if name not in GENERATORS:
+            raise SystemExit(f"{where}: unknown generated block {name!r} (known: {', '.join(GENERATORS)})")
+        if name not in cache:
+            cache[name] = GENERATORS[name]().rstrip("\n") + "\n"
+        out += [text[pos:m.end()], cache[name]]
+        pos = end
+    out.append(text[pos:])
+    return "".join(out)
+
+
+def stale(files: list[Path] | None = None) -> list[str]:
+    """The docs whose generated blocks differ from what the generators give now."""
+    cache: dict[str, str] = {}
+    return [p.relative_to(REPO).as_posix() for p in files or doc_files()
+            if render(t := p.read_text(), cache, p.name) != t]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--check", action="store_true", help="write nothing; exit 1 when a doc is out of date")
+    args = ap.parse_args(argv)
+    if args.check:
+        bad = stale()
+        for name in bad:
+            print(f"{name}: generated tables out of date (run python benchmarks/report.py)")
+        return 1 if bad else 0
+    cache: dict[str, str] = {}
+    for p in doc_files():
+        text = p.read_text()
+        new = render(text, cache, p.name)
+        if new != text:
+            p.write_text(new)
+            print(f"rewrote {p.relative_to(REPO)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
