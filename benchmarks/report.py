@@ -345,7 +345,7 @@ def render(text: str, cache: dict[str, str], where: str = "") -> str:
         if name not in GENERATORS:
             raise SystemExit(f"{where}: unknown generated block {name!r} (known: {', '.join(GENERATORS)})")
         if name not in cache:
-            cache[name] = GENERATORS[name]().rstrip("\n") + "\n"
+            cache[name] = GENERATORS[name]().rstrip("\n") + "\n\n"
         out += [text[pos:m.end()], cache[name]]
         pos = end
     out.append(text[pos:])
