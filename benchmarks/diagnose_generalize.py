@@ -28,13 +28,24 @@ import numpy as np  # noqa: E402
 
 from hollowtree.classes import ELEMENT_CLASSES, ClassId  # noqa: E402
 from hollowtree.pipeline.labels import LEAF_BITS  # noqa: E402
-from hollowtree.scenes.metrics import LOSS_BUCKETS, loss_buckets  # noqa: E402
+from hollowtree.scenes.metrics import LOSS_BUCKETS, false_positives, loss_buckets  # noqa: E402
 from hollowtree.tiling.readers import PointBlock, read_blocks  # noqa: E402
 from hollowtree.tiling.store import RunStore  # noqa: E402
 
 
-def diagnose_store(store_path: Path, *, tiny: int) -> list[dict]:
-    """:func:`scenes.metrics.loss_buckets` of one finished store against its input's ground truth."""
+def _element_names(scan: Path) -> dict[int, str]:
+    """Instance -> name from the ``<stem>.elements.parquet`` beside a generated scan (empty if none)."""
+    table = scan.with_name(scan.name.split(".")[0] + ".elements.parquet")
+    if not table.is_file():
+        return {}
+    import pyarrow.parquet as pq
+
+    t = pq.read_table(table, columns=["instance", "name"]).to_pydict()
+    return dict(zip(t["instance"], t["name"], strict=True))
+
+
+def diagnose_store(store_path: Path, *, tiny: int) -> tuple[list[dict], list[dict]]:
+    """:func:`scenes.metrics.loss_buckets` and :func:`scenes.metrics.false_positives` of one store."""
     store = RunStore.open(str(store_path))
     src = store.attrs["sources"]
     if len(src) != 1:
@@ -42,13 +53,19 @@ def diagnose_store(store_path: Path, *, tiny: int) -> list[dict]:
     b = PointBlock.concat(read_blocks(src[0]["path"]))
     n = len(b)
     seg = store.read_slice("labels/segment", 0, n)
-    rows = loss_buckets(np.asarray(b.extra["gt_class"]), np.asarray(b.extra["gt_instance"]),
-                        store.read_slice("labels/class", 0, n), store.read_slice("labels/instance", 0, n),
-                        (seg >> np.uint64(LEAF_BITS)).astype(np.int64), seg.astype(np.int64),
-                        classes=tuple(int(c) for c in ELEMENT_CLASSES), tiny=tiny)
+    gc, gi = np.asarray(b.extra["gt_class"]), np.asarray(b.extra["gt_instance"])
+    pc, pi = store.read_slice("labels/class", 0, n), store.read_slice("labels/instance", 0, n)
+    classes = tuple(int(c) for c in ELEMENT_CLASSES)
+    rows = loss_buckets(gc, gi, pc, pi, (seg >> np.uint64(LEAF_BITS)).astype(np.int64), seg.astype(np.int64),
+                        classes=classes, tiny=tiny)
     for r in rows:
         r["class"], r["predicted"] = ClassId(r["class"]).label, ClassId(r["predicted"]).label
-    return rows
+    fps = false_positives(gc, gi, pc, pi, classes=classes)
+    names = _element_names(Path(src[0]["path"]))
+    for r in fps:
+        r["class"], r["truth"] = ClassId(r["class"]).label, ClassId(r["truth"]).label
+        r["name"] = names.get(r["instance"], "")
+    return rows, fps
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -60,10 +77,11 @@ def main(argv: list[str] | None = None) -> int:
     stores = []
     for p in args.paths:
         stores += sorted((p / "stores").glob("*.zarr")) if (p / "stores").is_dir() else [p]
-    rows = []
+    rows, fps = [], []
     for s in stores:
-        for r in diagnose_store(s, tiny=args.tiny):
-            rows.append({"store": s.name, **r})
+        lost, extra = diagnose_store(s, tiny=args.tiny)
+        rows += [{"store": s.name, **r} for r in lost]
+        fps += [{"store": s.name, **r} for r in extra]
     table: dict[str, Counter] = defaultdict(Counter)
     for r in rows:
         table[r["class"]][r["bucket"]] += 1
@@ -72,8 +90,19 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{c:<9}" + "".join(f"{cnt[b]:>22}" for b in LOSS_BUCKETS))
     wrong = Counter((r["class"], r["predicted"]) for r in rows if r["bucket"] == "wrong class")
     print("wrong class (truth -> predicted):", ", ".join(f"{a}->{b} {n}" for (a, b), n in wrong.most_common()))
+    kinds = ("piece", "other element", "no element", "mixed")
+    fp_table: dict[str, Counter] = defaultdict(Counter)
+    for r in fps:
+        fp_table[r["class"]][r["kind"]] += 1
+    print("\nfalse positives (predictions matching no element of their class)")
+    print(f"{'class':<9}" + "".join(f"{k:>16}" for k in kinds))
+    for c, cnt in fp_table.items():
+        print(f"{c:<9}" + "".join(f"{cnt[k]:>16}" for k in kinds))
+    what = Counter((r["class"], r["kind"], r["truth"]) for r in fps)
+    print("false positives (predicted, kind, truth of most points):",
+          ", ".join(f"{a}/{k}/{t} {n}" for (a, k, t), n in what.most_common()))
     if args.json:
-        args.json.write_text(json.dumps(rows, indent=0) + "\n")
+        args.json.write_text(json.dumps({"lost": rows, "false_positives": fps}, indent=0) + "\n")
     return 0
 
 

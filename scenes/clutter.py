@@ -5,6 +5,8 @@ Re-exported by :mod:`scenes.elements`.
 
 from __future__ import annotations
 
+import numpy as np
+
 from hollowtree.scenes.mesh import TriMesh, concat_meshes
 from hollowtree.scenes.shapes import box, ellipsoid, frustum, revolve
 
@@ -113,3 +115,33 @@ def tree(*, x: float = 0.0, y: float = 0.0, height: float = 8.0, crown_radius: f
         ellipsoid((crown_radius, crown_radius, rz), center=(x, y, height - rz), n_segments=16, n_rings=8),
     ])
 
+
+
+def person(*, x: float = 0.0, y: float = 0.0, height: float = 1.7) -> TriMesh:
+    """A standing person: legs and torso as two frustums, and a head.
+
+    Examples
+    --------
+    >>> round(float(person(height=1.8).bounds()[1, 2]), 2)
+    1.79
+    """
+    h = height
+    return concat_meshes([frustum(0.18, 0.15, 0.0, 0.55 * h, n_segments=8, center=(x, y, 0.0)),
+                          frustum(0.2, 0.16, 0.55 * h, 0.87 * h, n_segments=8, center=(x, y, 0.0)),
+                          ellipsoid((0.1, 0.1, 0.12), center=(x, y, 0.93 * h), n_segments=8, n_rings=4)])
+
+
+def scaffold(*, x: float = 0.0, y: float = 0.0, yaw: float = 0.0, width: float = 4.0, depth: float = 1.5,
+             height: float = 6.0) -> TriMesh:
+    """Scaffolding: two rows of thin poles (one every 2 m or so) and a plank deck every 2 m.
+
+    Examples
+    --------
+    >>> float(scaffold(height=5.0).bounds()[1, 2])
+    5.0
+    """
+    w, d, h = width, depth, height
+    poles = [box((x + u - 0.03, y + v - 0.03, 0.0), (x + u + 0.03, y + v + 0.03, h))
+             for u in np.linspace(0, w, max(2, int(w // 2) + 1)) for v in (0.0, d)]
+    planks = [box((x, y, z), (x + w, y + d, z + 0.05)) for z in np.arange(2.0, h, 2.0)]
+    return concat_meshes(poles + planks).rotated_z(yaw, about=(x, y))

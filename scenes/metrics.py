@@ -466,3 +466,63 @@ def loss_buckets(
                         "predicted": int(got), "coarse_share": round(share, 3),
                         "share_of_segment": round(float(sn.max()) / s_seg[main], 3) if main else 0.0})
     return out
+
+
+def false_positives(
+    gt_class: npt.ArrayLike, gt_instance: npt.ArrayLike, pred_class: npt.ArrayLike,
+    pred_instance: npt.ArrayLike, *, classes: tuple[int, ...], iou_threshold: float = 0.5,
+) -> list[dict[str, Any]]:
+    """What each predicted element instance that matches no element of its class holds.
+
+    Parameters
+    ----------
+    gt_class, gt_instance, pred_class, pred_instance : array-like of int, shape (n_points,)
+        Ground truth and the run's labels, as in :func:`loss_buckets`.
+    classes : tuple of int
+        The element classes whose predictions are looked at.
+
+    Returns
+    -------
+    list of dict
+        One per unmatched prediction: ``class``, ``points``, ``truth`` (the ground-truth
+        class of most of its points), ``share`` (the share of its points in the one
+        ground-truth instance it overlaps most; 0 where that is no instance), ``instance``
+        (that instance, 0 for none) and ``kind``:
+        ``piece`` (most of it lies in one element of its own class: a fragment or a
+        duplicate), ``other element`` (most of it lies in one element of another class),
+        ``no element`` (most of it is wall, roof, ground, clutter or unlabelled) or
+        ``mixed``.
+
+    Examples
+    --------
+    >>> gc = np.r_[np.full(4, 4), np.full(6, 8)]; gi = np.r_[np.ones(4, int), np.zeros(6, int)]
+    >>> [(r["kind"], r["truth"]) for r in false_positives(gc, gi, np.full(10, 4), np.r_[np.ones(4), np.full(6, 2)],
+    ...                                                  classes=(4,))]
+    [('no element', 8)]
+    """
+    gcls, ginst = np.asarray(gt_class, np.int64), np.asarray(gt_instance, np.int64)
+    pcls, pinst = np.asarray(pred_class, np.int64), np.asarray(pred_instance, np.int64)
+    gkey = np.where(ginst > 0, ginst * 256 + gcls, 0)
+    gk, gn = np.unique(gkey, return_counts=True)
+    gsize = dict(zip(gk.tolist(), gn.tolist(), strict=True))
+    out: list[dict[str, Any]] = []
+    for c in classes:
+        for p in np.unique(pinst[(pcls == c) & (pinst > 0)]).tolist():
+            member = (pcls == c) & (pinst == p)
+            m = int(member.sum())
+            iou_same, _ = _best_overlap(np.where(gcls == c, gkey, 0), member, gsize)
+            if iou_same >= iou_threshold:
+                continue
+            k, n = np.unique(gkey[member], return_counts=True)
+            top = int(np.argmax(n))
+            key, share = int(k[top]), float(n[top] / m)
+            truth = int(np.bincount(gcls[member]).argmax())
+            if key and share > 0.5:
+                kind = "piece" if key % 256 == c else "other element"
+            elif float(np.mean(gkey[member] == 0)) > 0.5:
+                kind = "no element"
+            else:
+                kind = "mixed"
+            out.append({"class": int(c), "points": m, "truth": truth, "share": round(share if key else 0.0, 3),
+                        "kind": kind, "instance": key // 256})
+    return out

@@ -51,7 +51,7 @@ import numpy as np
 from hollowtree.classes import ClassId
 from hollowtree.errors import ConfigError
 from hollowtree.scenes._builders import EYE
-from hollowtree.scenes.clutter import bench, bicycle, car, tree
+from hollowtree.scenes.clutter import bench, bicycle, car, person, scaffold, tree
 from hollowtree.scenes.elements import (
     arcade,
     bastion,
@@ -65,7 +65,7 @@ from hollowtree.scenes.elements import (
 )
 from hollowtree.scenes.mesh import TriMesh, concat_meshes
 from hollowtree.scenes.scene import Scene, SceneBuilder
-from hollowtree.scenes.shapes import ArcPath, StraightPath, box, ellipsoid, frustum
+from hollowtree.scenes.shapes import ArcPath, StraightPath, box
 
 __all__ = ["FAMILIES", "SPLITS", "ScanDraw", "family_of", "procedural_site", "scan_draw", "split_seeds"]
 
@@ -270,22 +270,16 @@ def _clutter(s: _Site, x0: float, x1: float, y0: float, y1: float, n: int) -> No
         if kind == "tree":
             m = tree(x=x, y=y, height=s.u(3.0, 12.0), crown_radius=s.u(1.0, 4.0))
         elif kind == "person":
-            h = s.u(1.5, 1.9)
-            m = concat_meshes([frustum(0.18, 0.15, 0.0, 0.55 * h, n_segments=8, center=(x, y, 0.0)),
-                               frustum(0.2, 0.16, 0.55 * h, 0.87 * h, n_segments=8, center=(x, y, 0.0)),
-                               ellipsoid((0.1, 0.1, 0.12), center=(x, y, 0.93 * h), n_segments=8, n_rings=4)])
+            m = person(x=x, y=y, height=s.u(1.5, 1.9))
         elif kind == "car":
             m = car(x=x, y=y, yaw=yaw)
         elif kind == "bench":
             m = bench(x=x, y=y, yaw=yaw)
         elif kind == "bicycle":
             m = bicycle(x=x, y=y, yaw=yaw)
-        else:  # scaffolding: a grid of poles and planks
+        else:
             w, d, h = s.u(2.0, 6.0), s.u(1.0, 2.0), s.u(3.0, 10.0)
-            poles = [box((x + u - 0.03, y + v - 0.03, 0.0), (x + u + 0.03, y + v + 0.03, h))
-                     for u in np.linspace(0, w, max(2, int(w // 2) + 1)) for v in (0.0, d)]
-            planks = [box((x, y, z), (x + w, y + d, z + 0.05)) for z in np.arange(2.0, h, 2.0)]
-            m = concat_meshes(poles + planks).rotated_z(yaw, about=(x, y))
+            m = scaffold(x=x, y=y, yaw=yaw, width=w, depth=d, height=h)
         s.add(m, ClassId.OTHER, f"{kind} {k + 1}")
 
 
