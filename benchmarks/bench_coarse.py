@@ -201,10 +201,9 @@ def run_tile_kernel(xyz: np.ndarray, eps: float, seed: int = 0) -> dict:
     """What ``hollowtree coarse`` runs on one tile (``primitives.segment.segment_points``)
     with the stage's defaults: the three steps above plus free segments and the sparse
     second pass. Timed as a whole."""
-    from hollowtree.primitives.ransac import RansacParams
     from hollowtree.primitives.segment import CoarseParams, segment_points
 
-    params = CoarseParams(ransac=RansacParams(min_support=1000, cluster_epsilon=max(0.15, 2.0 * eps / 3.0)))
+    params = CoarseParams(cluster_epsilon=max(0.15, 2.0 * eps / 3.0))
     t0 = time.perf_counter()
     seg, fits, _ = segment_points(xyz, params, eps, np.random.default_rng(seed))
     return dict(total_s=time.perf_counter() - t0, segments=np.where(seg > 0, seg, -1), n_segments=len(fits))

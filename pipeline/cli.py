@@ -22,7 +22,6 @@ from hollowtree.pipeline.cli_args import (
     _float,
     _int_list,
     _non_negative,
-    _nonnegative_int,
     _positive_int,
     _section,
     _set_flag,
@@ -144,13 +143,12 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--store", required=True, help="run store: a folder path or an fsspec URL")
     from hollowtree.pipeline.workflow import CoarseSection, IngestSection, TreeSection
 
-    _stage_flag(g, IngestSection, "tile_size", "--tile-size", type=_tile_size)
-    _stage_flag(g, IngestSection, "buffer", "--buffer", type=_float)
-    _stage_flag(g, IngestSection, "voxel", "--voxel", type=_float)
-    _stage_flag(g, IngestSection, "bbox", "--bbox", type=_bbox, metavar="XMIN,YMIN,XMAX,YMAX")
-    _stage_flag(g, IngestSection, "tiles", "--tiles", type=_int_list, metavar="ID,ID,...")
-    _stage_flag(g, IngestSection, "units", "--units", type=_units, metavar="UNIT")
-    _stage_flag(g, IngestSection, "chunk_size", "--chunk-size", type=_positive_int)
+    _stage_flag(g, IngestSection, "tile_size", type=_tile_size)
+    _stage_flag(g, IngestSection, "buffer", "voxel")
+    _stage_flag(g, IngestSection, "bbox", type=_bbox, metavar="XMIN,YMIN,XMAX,YMAX")
+    _stage_flag(g, IngestSection, "tiles", type=_int_list, metavar="ID,ID,...")
+    _stage_flag(g, IngestSection, "units", type=_units, metavar="UNIT")
+    _stage_flag(g, IngestSection, "chunk_size")
     _set_flag(g, "ingest")
     g.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process; "
                    "default: a local cluster of worker threads in this process")
@@ -171,20 +169,11 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     c.add_argument("store", help="run store made by `hollowtree ingest`")
-    _stage_flag(c, CoarseSection, "epsilon", "--epsilon", type=_float)
-    _stage_flag(c, CoarseSection, "alpha", "--alpha", type=_float)
-    _stage_flag(c, CoarseSection, "cluster_epsilon", "--cluster-epsilon", type=_float)
-    _stage_flag(c, CoarseSection, "min_support", "--min-support", type=_positive_int)
-    _stage_flag(c, CoarseSection, "eps", "--eps", type=_float)
-    _stage_flag(c, CoarseSection, "min_samples", "--min-samples", type=_positive_int)
+    _stage_flag(c, CoarseSection, "epsilon", "alpha", "cluster_epsilon", "min_support", "eps", "min_samples")
     c.add_argument("--no-free-segments", action="store_true",
                    help="leave points that no primitive explains unsegmented (default: DBSCAN them too)")
-    _stage_flag(c, CoarseSection, "free_min_points", "--free-min-points", type=_positive_int)
-    _stage_flag(c, CoarseSection, "block_points", "--block-points", type=_nonnegative_int)
-    _stage_flag(c, CoarseSection, "block_margin", "--block-margin", type=_float)
-    _stage_flag(c, CoarseSection, "sparse_factor", "--sparse-factor", type=_non_negative)
-    _stage_flag(c, CoarseSection, "group_gap", "--group-gap", type=_non_negative)
-    _stage_flag(c, CoarseSection, "seed", "--seed", type=int)
+    _stage_flag(c, CoarseSection, "free_min_points", "block_points", "block_margin", "sparse_factor", "group_gap",
+                "seed")
     _set_flag(c, "coarse")
     _cluster_args(c)
     c.set_defaults(func=_cmd_coarse)
@@ -204,14 +193,8 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     tr.add_argument("store", help="run store after `hollowtree coarse`")
-    _stage_flag(tr, TreeSection, "max_depth", "--max-depth", type=int)
-    _stage_flag(tr, TreeSection, "decision", "--decision", choices=["split-model", "energy"])
-    _stage_flag(tr, TreeSection, "threshold", "--threshold", type=_float)
-    _stage_flag(tr, TreeSection, "batch_points", "--batch-points", type=_positive_int)
-    _stage_flag(tr, TreeSection, "max_group_points", "--max-group-points", type=_nonnegative_int)
-    _stage_flag(tr, TreeSection, "weights", "--weights")
-    _stage_flag(tr, TreeSection, "device", "--device", choices=["cpu", "cuda", "auto"])
-    _stage_flag(tr, TreeSection, "seed", "--seed", type=int)
+    _stage_flag(tr, TreeSection, "max_depth", "decision", "threshold", "batch_points", "max_group_points", "weights",
+                "device", "seed")
     _set_flag(tr, "tree")
     _cluster_args(tr)
     tr.set_defaults(func=_cmd_tree)
@@ -341,6 +324,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--png", type=Path, help="top and side views coloured by class")
     e.add_argument("--no-progress", action="store_true", help="no progress bar")
     e.set_defaults(func=_cmd_export)
+    from hollowtree.pipeline.view import add_parser as add_view_parser
+
+    add_view_parser(sub)  # view: the store in the browser
     return parser
 
 

@@ -1,6 +1,7 @@
 """The command line's argument types and the flags derived from the workflow's sections
-(one declaration per parameter: ``pipeline/workflow.py``); ``pipeline/cli.py`` builds the
-parser with them."""
+(one declaration per parameter: the stages' params dataclasses, from which
+``pipeline/workflow.py`` derives the sections); ``pipeline/cli.py`` builds the parser with
+them."""
 
 from __future__ import annotations
 
@@ -10,18 +11,18 @@ from typing import Any
 __all__: list[str] = []
 
 
-def _positive_int(text: str) -> int:
+def _int(text: str) -> int:
     try:
-        value = int(text.replace("_", ""))
+        return int(text.replace("_", ""))
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+
+
+def _positive_int(text: str) -> int:
+    value = _int(text)
     if value <= 0:
         raise argparse.ArgumentTypeError(f"must be a positive integer; got {value}")
     return value
-
-
-def _nonnegative_int(text: str) -> int:
-    return 0 if text.strip() == "0" else _positive_int(text)
 
 
 def _float(text: str) -> float:
@@ -38,15 +39,30 @@ def _non_negative(text: str) -> float:
     return value
 
 
-def _stage_flag(parser: argparse.ArgumentParser, section: Any, key: str, *names: str, **kwargs: Any) -> None:
-    """A flag for the workflow key ``key`` of ``section`` (``pipeline.workflow``): its help
-    and its default are the section's (one declaration); not given = the section's default."""
+def _stage_flag(parser: argparse.ArgumentParser, section: Any, *keys: str, **kwargs: Any) -> None:
+    """The flags ``--key-name`` for the workflow keys ``keys`` of ``section``
+    (``pipeline.workflow``): their help, default, type and choices are the section's (one
+    declaration: the stage's params dataclass); their bounds are checked with the
+    section's (:func:`_section`). Not given = the section's default."""
+    for key in keys:
+        _one_flag(parser, section, key, **kwargs)
+
+
+def _one_flag(parser: argparse.ArgumentParser, section: Any, key: str, **kwargs: Any) -> None:
+    import typing
+
     field = section.model_fields[key]
     text = (field.description or "").replace("%", "%%")
     if field.default is not None and not isinstance(field.default, (bool, list)):
         d = field.default
         text += f" (default {d:,})" if isinstance(d, int) else f" (default {d:g})" if isinstance(d, float) else f" (default {d})"
-    parser.add_argument(*names, dest=key, default=None, help=text, **kwargs)
+    kinds = [typing.get_args(a)[0] if typing.get_origin(a) is typing.Annotated else a
+             for a in (typing.get_args(field.annotation) or (field.annotation,)) if a is not type(None)]
+    if typing.get_origin(field.annotation) is typing.Literal:
+        kwargs.setdefault("choices", list(typing.get_args(field.annotation)))
+    elif kinds in ([int], [float]):
+        kwargs.setdefault("type", _int if kinds == [int] else _float)
+    parser.add_argument(f"--{key.replace('_', '-')}", dest=key, default=None, help=text, **kwargs)
 
 
 def _cluster_args(parser: argparse.ArgumentParser) -> None:

@@ -20,7 +20,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -33,7 +33,6 @@ from hollowtree.primitives.dbscan import window_spacing
 from hollowtree.primitives.group import (
     segment_contacts_chunked,
 )
-from hollowtree.primitives.ransac import RansacParams
 from hollowtree.primitives.score import load_kernels
 from hollowtree.primitives.segment import (
     PRIMITIVE_CODES,
@@ -382,9 +381,7 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
         eps = auto_eps if eps is None else eps
         if cluster_epsilon is None:
             cluster_epsilon = max(0.15, 2.0 * auto_eps / 3.0)
-    ransac = RansacParams.from_dict({**params.ransac.to_dict(), "cluster_epsilon": float(cluster_epsilon)})
-    params = CoarseParams.from_dict({**params.to_dict(), "ransac": ransac.to_dict(),
-                                     "cluster_epsilon": float(cluster_epsilon), "eps": float(eps)})
+    params = replace(params, cluster_epsilon=float(cluster_epsilon), eps=float(eps))
     cfg = {"params": params.to_dict(), "eps": float(eps), "algorithm": COARSE_ALGORITHM}
     h = params_hash([cfg, attrs["ingest"]["params_hash"]])
     cfg["params_hash"] = h

@@ -28,10 +28,8 @@ Store layout written here (``docs/store.md``)::
 from __future__ import annotations
 
 import functools
-import math
 import time
-from dataclasses import asdict, dataclass
-from pathlib import Path
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -40,6 +38,7 @@ import pyarrow as pa
 from hollowtree.classes import PLANAR_CLASSES, ClassId
 from hollowtree.errors import ConfigError, PipelineError
 from hollowtree.pipeline.graph import in_child
+from hollowtree.pipeline.tree_params import DEVICES, TreeStageParams
 from hollowtree.tiling.stage import Stage, params_hash
 from hollowtree.tiling.store import RunStore
 from hollowtree.tree.tall import short_minarets, size_rules, slender_domes
@@ -47,8 +46,6 @@ from hollowtree.tree.tall import short_minarets, size_rules, slender_domes
 __all__ = ["TreeStageParams", "tree_batch", "run_tree", "TreeReport", "plan_batches", "group_starts"]
 
 STAGE = "tree"
-#: How a node's proposal is kept (``TreeStageParams.decision``).
-DECISIONS = ("split-model", "energy")
 #: Version of the tree's algorithm (tree/): part of the stage's parameters hash and of the
 #: workflow parameters a run records, so a store made by an older version is redone. What
 #: each version changed is in CHANGELOG.md (and git).
@@ -56,106 +53,6 @@ TREE_ALGORITHM = "tree-v21"
 #: Points sampled from each wall instance for the frames (tree/frames.py): a pier's face
 #: beside a bay's jamb is a strip a few tenths of a metre wide in a facade's wall.
 WALL_SAMPLE_POINTS = 16384
-
-
-@dataclass(frozen=True, kw_only=True)
-class TreeStageParams:
-    """Parameters of the tree stage.
-
-    Parameters
-    ----------
-    max_depth : int
-        The paper's ``d``.
-    look_ahead : bool
-        A wall's storeys cut that no proposal beats is kept when one of its storeys with a
-        row of openings would be cut into bays (``tree.build.build_tree(look_ahead=)``).
-    decision : str
-        ``"split-model"`` (the learned split model, ``tree/data/split-v1.json``) or
-        ``"energy"`` (the paper's ``xi = w . e``, ``tree/data/energy-v1.json``).
-    threshold : float or None
-        A split is kept when its score (the split model's probability, or ``xi``) reaches
-        this; None = the model's own.
-    batch_points : int
-        Points per task (small segments are batched; a larger segment is one task).
-    weights : str or None
-        HollowNet weights; None = the shipped default.
-    split_model : str or None
-        The split model's JSON (``hollowtree fit-split --out``); None = the shipped
-        ``tree/data/split-v1.json``.
-    seed : int
-        Segment ``g`` builds its tree with ``SeedSequence([seed, g])``.
-    roof_min_height : float or None
-        A leaf classed ground or roof is roof when its median height above the local
-        ground (``tree/ground.py``) is at least this many metres, else ground; None keeps
-        HollowNet's class.
-    max_group_points : int
-        An element group with more points (a ground plane of a large scan can hold 40 %
-        of it) builds its tree on a seeded random sample of about this many points, and
-        each of its points takes the labels of its nearest sampled point, so a task's
-        memory follows this bound rather than the scan; 0 = never sample.
-    pillar_max_height : float or None
-        A part HollowNet calls pillar that is taller than this many metres is a minaret
-        (``tree/tall.py``: HollowNet cannot see size); None keeps HollowNet's class.
-    other_max_base, other_max_size : float or None
-        A part HollowNet calls other (clutter) whose lowest point is more than
-        ``other_max_base`` metres above the local ground, or that is larger than
-        ``other_max_size`` metres along x, y or z, takes its next most probable class
-        (``tree.tall.not_clutter``); None turns that test off.
-    """
-
-    max_depth: int = 3
-    look_ahead: bool = True
-    decision: str = "split-model"
-    threshold: float | None = None
-    batch_points: int = 200_000
-    weights: str | None = None
-    split_model: str | None = None
-    seed: int = 0
-    roof_min_height: float | None = 1.5
-    max_group_points: int = 1_000_000
-    pillar_max_height: float | None = 10.0
-    other_max_base: float | None = 2.0
-    other_max_size: float | None = 15.0
-
-    def __post_init__(self) -> None:
-        if not (isinstance(self.max_depth, int) and self.max_depth >= 0):
-            raise ConfigError(f"The 'max_depth' parameter of tree must be an int >= 0. Got {self.max_depth!r} instead.")
-        if not isinstance(self.look_ahead, bool):
-            raise ConfigError(f"The 'look_ahead' parameter of tree must be a bool. Got {self.look_ahead!r} instead.")
-        if self.decision not in DECISIONS:
-            raise ConfigError(f"The 'decision' parameter of tree must be one of {list(DECISIONS)}. "
-                              f"Got {self.decision!r} instead.")
-        for name in ("weights", "split_model"):
-            path = getattr(self, name)
-            if path is not None and not Path(path).is_file():
-                raise ConfigError(f"tree.{name}: file {path} does not exist")
-        if not (isinstance(self.batch_points, int) and self.batch_points >= 1):
-            raise ConfigError(f"The 'batch_points' parameter of tree must be an int >= 1. Got {self.batch_points!r} instead.")
-        if isinstance(self.max_group_points, bool) or not isinstance(self.max_group_points, int) \
-                or not (self.max_group_points == 0 or self.max_group_points >= 1000):
-            raise ConfigError(f"The 'max_group_points' parameter of tree must be 0 or an int >= 1000. "
-                              f"Got {self.max_group_points!r} instead.")
-        if self.pillar_max_height is not None and not (
-                isinstance(self.pillar_max_height, (int, float)) and math.isfinite(self.pillar_max_height)
-                and self.pillar_max_height > 0):
-            raise ConfigError(f"The 'pillar_max_height' parameter of tree must be a float in the range (0.0, inf) "
-                              f"or None. Got {self.pillar_max_height!r} instead.")
-        for name in ("other_max_base", "other_max_size"):
-            v = getattr(self, name)
-            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
-                                  or v <= 0):
-                raise ConfigError(f"The '{name}' parameter of tree must be a float in the range (0.0, inf) "
-                                  f"or None. Got {v!r} instead.")
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    @classmethod
-    def from_workflow(cls, section: Any) -> TreeStageParams:
-        return cls(max_depth=section.max_depth, look_ahead=section.look_ahead, decision=section.decision, threshold=section.threshold,
-                   batch_points=section.batch_points, weights=section.weights, split_model=section.split_model, seed=section.seed, roof_min_height=section.roof_min_height,
-                   max_group_points=section.max_group_points, pillar_max_height=section.pillar_max_height,
-                   other_max_base=section.other_max_base, other_max_size=section.other_max_size)
 
 
 def plan_batches(offsets: np.ndarray, batch_points: int) -> list[tuple[int, int]]:
@@ -188,11 +85,6 @@ def _worker_threads() -> int | None:
     except (ImportError, ValueError):
         return None
     return 1
-
-
-#: Where HollowNet runs (``tree.device``): ``auto`` is CUDA where the worker's torch sees a
-#: GPU, else the CPU.
-DEVICES = ("cpu", "cuda", "auto")
 
 
 def _device(device: str) -> str:

@@ -1,10 +1,13 @@
 """Workflow files: the YAML a user submits, checked completely before anything runs.
 
 A workflow names the input (files, or a synthetic site made on first use), the run store,
-every stage's parameters (defaults = the stage commands' defaults), the cluster and the
-outputs. :func:`load_workflow` parses the file, applies ``--set key.path=value``
-overrides and validates everything with pydantic; any problem becomes one
-:class:`WorkflowError` line naming the file, the key path and the line::
+every stage's parameters, the cluster and the outputs. The stages' sections (``ingest``,
+``coarse``, ``tree``) are derived from the stages' params dataclasses, where each
+parameter's default, bounds and description are declared once (``hollowtree.params``);
+the step commands' flags are derived from the sections. :func:`load_workflow` parses the
+file, applies ``--set key.path=value`` overrides and validates everything with pydantic;
+any problem becomes one :class:`WorkflowError` line naming the file, the key path and the
+line::
 
     workflows/bad.yaml:7: coarse.epsilonn: unknown key (did you mean 'epsilon'?)
 
@@ -19,12 +22,25 @@ import difflib
 import json
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, Union
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    create_model,
+    field_validator,
+    model_validator,
+)
 
 from hollowtree.errors import ConfigError
+from hollowtree.params import Spec, specs
+from hollowtree.pipeline.tree_params import DEVICES, TreeStageParams
+from hollowtree.primitives.coarse_params import CoarseParams
+from hollowtree.tiling.ingest_params import IngestParams
 
 __all__ = ["Workflow", "WorkflowError", "load_workflow", "json_schema", "apply_override", "shipped_workflows"]
 
@@ -33,8 +49,6 @@ class WorkflowError(ConfigError):
     """A workflow file (or an override) that cannot run; the message is one line."""
 
 
-PosFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-NonNegFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 PosInt = Annotated[int, Field(ge=1)]
 
 
@@ -82,109 +96,64 @@ class InputSection(_Section):
         return [self.synth.path()] if self.synth is not None else [Path(f) for f in self.files]
 
 
-class IngestSection(_Section):
-    """``hollowtree ingest`` parameters (tiling/ingest.py ``IngestParams``)."""
+# ------------------------------------------------------------ the stages' sections
+def _annotation(spec: Spec) -> Any:
+    """The pydantic type of a stage parameter: its field's type with its rule's bounds and
+    choices (``hollowtree.params``)."""
+    rule = spec.rule
 
-    tile_size: PosFloat | None = Field(None, description="tile core side, metres; null = about tile_points points per tile")
-    tile_points: PosInt = Field(2_000_000, description="target points per tile for the automatic tile size")
-    buffer: NonNegFloat = Field(2.0, description="buffer width, metres")
-    voxel: PosFloat | None = Field(None, description="keep one point per voxel of this size, metres; null = all")
-    bbox: tuple[float, float, float, float] | None = Field(None, description="only tiles meeting [xmin, ymin, xmax, ymax]")
-    tiles: list[Annotated[int, Field(ge=0)]] | None = Field(None, description="only these tile ids")
-    chunk_size: PosInt = Field(1_000_000, description="records per map task")
-    units: PosFloat | str | None = Field(
-        None, description="metres per coordinate unit of the inputs (0.3048) or a unit's name (m, ft, us-ft); "
-                          "null = the linear unit of their CRS, metres where they have none")
+    def scalar(kind: Any) -> Any:
+        if kind is float:
+            return Annotated[float, Field(allow_inf_nan=False, **rule.bounds)]
+        if kind is int and rule.bounds:
+            return Annotated[int, Field(**rule.bounds)]
+        if kind is str and rule.choices is not None:
+            return Literal[rule.choices]
+        return kind
 
-    @field_validator("units")
-    @classmethod
-    def _unit_known(cls, v: float | str | None) -> float | str | None:
-        from hollowtree.tiling.readers import UNIT_METRES
+    alts = [(tuple[(scalar(k[1]),) * k[2]] if k[2] else Annotated[list[scalar(k[1])], Field(min_length=1)])
+            if isinstance(k, tuple) else scalar(k) for k in spec.kinds]
+    ann = Union.__getitem__((*alts, None) if spec.none_ok else tuple(alts))  # X | Y | ... of a list
+    if rule.check is None:
+        return ann
+    check = rule.check
 
-        if isinstance(v, str) and v.lower() not in UNIT_METRES:
-            raise ValueError(f"{v!r} is not a unit this knows ({', '.join(sorted(UNIT_METRES))}); give metres per unit")
+    def checked(v: Any) -> Any:
+        if v is not None and (problem := check(v)) is not None:
+            raise ValueError(problem)
         return v
 
-
-class CoarseSection(_Section):
-    """``hollowtree coarse`` parameters (pipeline/coarse.py ``CoarseParams``)."""
-
-    k: Annotated[int, Field(ge=3)] = Field(16, description="neighbours of the PCA normals")
-    epsilon: PosFloat = Field(0.03, description="RANSAC distance, metres")
-    alpha: Annotated[float, Field(gt=0, lt=90)] = Field(20.0, description="RANSAC normal angle, degrees")
-    cluster_epsilon: PosFloat | None = Field(None, description="RANSAC bitmap cell, metres; null = max(0.15, 2/3 x the automatic eps)")
-    min_support: PosInt = Field(1000, description="smallest primitive, points")
-    probability: Annotated[float, Field(gt=0, lt=1)] = Field(0.01, description="accepted chance of missing a primitive")
-    shapes: list[Literal["plane", "sphere", "cylinder", "cone", "torus"]] = Field(
-        ["plane", "sphere", "cylinder", "cone"], description="primitive types to look for")
-    eps: PosFloat | None = Field(None, description="DBSCAN radius, metres; null = 9 x the scan's 25 % 8-NN spacing")
-    min_samples: PosInt = Field(10, description="DBSCAN core threshold")
-    free_segments: bool = Field(True, description="cluster the points no primitive explains into free segments too")
-    free_min_points: PosInt = Field(200, description="smallest free segment, points")
-    seed: int = Field(0, description="base seed; tile t uses [seed, t]")
-    block_points: Annotated[int, Field(ge=0)] = Field(
-        2_200_000, description="tiles with more points are segmented in blocks of at most this many, each a task; "
-                               "0 = never")
-    block_margin: PosFloat | None = Field(
-        None, description="context around a block, metres; null = min(ingest buffer, 2 x eps)")
-    sparse_factor: Annotated[float, Field(ge=0)] = Field(
-        2.0, description="unsegmented points at least this many times sparser than the scan are segmented once "
-                         "more with RANSAC and DBSCAN distances x (2 x this); 0 = one pass")
-    group_gap: Annotated[float, Field(ge=0)] = Field(
-        0.6, description="segments (not large planes) whose points come this close, metres, are one element "
-                         "group for the tree; 0 = every segment alone")
-    group_min_contacts: PosInt = Field(3, description="contacts two segments need to be grouped")
-    group_max_plane: PosFloat = Field(
-        6.0, description="planes wider than this in x-y, metres (ground, roofs, facades), are not grouped with "
-                         "their neighbours (but see group_set_in), nor free segments wider than 3 x this")
-    group_set_in: Annotated[float, Field(ge=0)] = Field(
-        1.5, description="a segment that touches a large wall and lies within this many metres of its plane "
-                         "(an arch's jambs and intrados in an arcade's face) joins that wall; 0 = never")
-    group_stack: Annotated[float, Field(ge=0)] = Field(
-        1.0, description="groups stacked one on another (the upper starts at most this many metres above the "
-                         "lower's top, footprints overlapping by 70 %: a minaret's stages) are one group; 0 = never")
+    return Annotated[ann, AfterValidator(checked)]
 
 
-#: The smallest sample a large element group's tree is built on (tree.max_group_points).
-MIN_GROUP_SAMPLE = 1000
+def _section(name: str, params: type, doc: str, extra: dict[str, tuple[str | None, Any, Any]] | None = None) -> Any:
+    """The workflow section ``name`` of the stage whose parameters are the dataclass
+    ``params``: one key per declared workflow parameter, with its default, bounds, choices
+    and description. ``extra``: keys the stage's parameters do not hold, as ``key:
+    (the key it follows or None for first, type, Field)``."""
+    extra = extra or {}
+    fields: dict[str, Any] = {k: (t, f) for k, (after, t, f) in extra.items() if after is None}
+    for spec in specs(params):
+        if spec.rule.workflow:
+            default = list(spec.default) if isinstance(spec.default, tuple) and spec.kinds[0][2] is None \
+                else spec.default
+            fields[spec.name] = (_annotation(spec), Field(default, description=spec.rule.doc))
+        fields.update({k: (t, f) for k, (after, t, f) in extra.items() if after == spec.name})
+    return create_model(name, __base__=_Section, __doc__=doc, __module__=__name__, **fields)
 
 
-class TreeSection(_Section):
-    """The hierarchical tree (tree/): ``enabled: false`` stops after the coarse stage."""
-
-    enabled: bool = Field(True, description="run the tree + HollowNet stage")
-    max_depth: Annotated[int, Field(ge=0)] = Field(3, description="maximum depth d of Algorithm 1")
-    look_ahead: bool = Field(
-        True, description="a storeys split that its own score rejects is kept when one of its storeys would split (into bays): a storey cut is judged by what it leads to")
-    decision: Literal["split-model", "energy"] = Field(
-        "split-model", description="how a node's best proposal is chosen and kept: the learned split model (tree/data/split-v1.json) or the paper's energy xi = w . e (tree/data/energy-v1.json)")
-    threshold: float | None = Field(None, description="a split is kept when its score (the split model's probability, or xi) >= this; null = the model's own")
-    batch_points: PosInt = Field(200_000, description="points per tree task (small segments are batched)")
-    weights: str | None = Field(None, description="HollowNet weights file; null = the shipped default")
-    device: Literal["cpu", "cuda", "auto"] = Field(
-        "cpu", description="where HollowNet runs in each worker: cpu, cuda, or auto (CUDA where the worker's torch sees a GPU); not a parameter of the result")
-    split_model: str | None = Field(
-        None, description="split model file (written by hollowtree fit-split); null = the shipped tree/data/split-v1.json")
-    seed: int = Field(0, description="segment g builds its tree with seed [seed, g]")
-    roof_min_height: Annotated[float, Field(ge=0)] | None = Field(
-        1.5, description="a part classed ground or roof is roof when its median height above the local ground is at least this (m); null = HollowNet's class as it is")
-    max_group_points: Annotated[int, Field(ge=0)] = Field(
-        1_000_000, description="an element group with more points builds its tree on a seeded sample of this many (0 or at least 1000); its points take their nearest sampled point's labels (bounded memory); 0 = never sample")
-
-    pillar_max_height: Annotated[float, Field(gt=0)] | None = Field(
-        10.0, description="a part HollowNet calls pillar that is taller than this (m) is a minaret unless its footprint is flat, and a minaret instance not taller than this is a pillar (HollowNet cannot see size; its training pillars are 2.5-8 m, its minarets 12-40 m); with it on, a dome instance taller than this and more than 1.5 times as tall as it is wide is a minaret; null = HollowNet's class as it is")
-
-    other_max_base: Annotated[float, Field(gt=0)] | None = Field(
-        2.0, description="a part HollowNet calls other (clutter) whose lowest point is more than this (m) above the local ground takes its next most probable class (clutter stands on the ground; a dome on its drum looks like a bush to HollowNet); null = no such test")
-    other_max_size: Annotated[float, Field(gt=0)] | None = Field(
-        15.0, description="a part HollowNet calls other (clutter) larger than this (m) along x, y or z takes its next most probable class (its largest training clutter, trees, is at most 12 m tall and 11 m wide); null = no such test")
-
-    @field_validator("max_group_points")
-    @classmethod
-    def _sample_not_tiny(cls, v: int) -> int:
-        if 0 < v < MIN_GROUP_SAMPLE:
-            raise ValueError(f"must be 0 (never sample) or at least {MIN_GROUP_SAMPLE}")
-        return v
+IngestSection = _section("IngestSection", IngestParams,
+                         "``hollowtree ingest`` parameters (``IngestParams``, tiling/ingest_params.py).")
+CoarseSection = _section("CoarseSection", CoarseParams,
+                         "``hollowtree coarse`` parameters (``CoarseParams``, primitives/coarse_params.py).")
+TreeSection = _section(
+    "TreeSection", TreeStageParams,
+    "The hierarchical tree (``TreeStageParams``, pipeline/tree_params.py): ``enabled: false`` stops after the "
+    "coarse stage.",
+    {"enabled": (None, bool, Field(True, description="run the tree + HollowNet stage")),
+     "device": ("weights", Literal[DEVICES], Field(
+         "cpu", description="where HollowNet runs in each worker: cpu, cuda, or auto (CUDA where the worker's "
+                            "torch sees a GPU); not a parameter of the result"))})
 
 
 class JobqueueSection(_Section):

@@ -12,11 +12,19 @@
 The per-tile Dask task and the stitching of a run store are in ``pipeline/coarse.py``.
 """
 
-from hollowtree.primitives.dbscan import dbscan_labels, dbscan_segments, default_eps, window_spacing
-from hollowtree.primitives.normals import NormalResult, estimate_normals
-from hollowtree.primitives.ransac import RansacParams, RansacResult, efficient_ransac
-from hollowtree.primitives.shapes import FailedFit, PrimitiveFit
-from hollowtree.primitives.stitch import StitchResult, UnionFind, csr_by_segment, stitch_segments
+import importlib
+from typing import Any
+
+#: Where each name of the package lives: imported on first use, so that the light
+#: modules (``coarse_params``: the stage's parameters) load without the kernels.
+_WHERE = {
+    "dbscan": ("dbscan_labels", "dbscan_segments", "default_eps", "window_spacing"),
+    "normals": ("NormalResult", "estimate_normals"),
+    "ransac": ("RansacParams", "RansacResult", "efficient_ransac"),
+    "shapes": ("FailedFit", "PrimitiveFit"),
+    "stitch": ("StitchResult", "UnionFind", "csr_by_segment", "stitch_segments"),
+}
+_MODULE = {name: mod for mod, names in _WHERE.items() for name in names}
 
 __all__ = [
     "FailedFit",
@@ -35,3 +43,9 @@ __all__ = [
     "stitch_segments",
     "window_spacing",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _MODULE:
+        return getattr(importlib.import_module(f"hollowtree.primitives.{_MODULE[name]}"), name)
+    raise AttributeError(f"module 'hollowtree.primitives' has no attribute {name!r}")

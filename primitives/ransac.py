@@ -82,7 +82,8 @@ from scipy.sparse.csgraph import connected_components
 
 from hollowtree.columns import column_max, column_min, column_span
 from hollowtree.errors import ConfigError
-from hollowtree.primitives.ransac_params import RansacParams, RansacResult, _validate
+from hollowtree.params import check_values
+from hollowtree.primitives.ransac_params import RansacParams, RansacResult
 from hollowtree.primitives.score import (
     FUSED_KINDS,
     PointColumns,
@@ -91,7 +92,6 @@ from hollowtree.primitives.score import (
     shared_hits,
 )
 from hollowtree.primitives.shapes import (
-    DEFAULT_KINDS,
     KINDS,
     MINIMAL_SET_SIZE,
     FailedFit,
@@ -532,9 +532,9 @@ def efficient_ransac(
     alpha_deg: float,
     cluster_epsilon: float,
     min_support: int,
-    probability: float = 0.01,
-    shapes: Sequence[str] = DEFAULT_KINDS,
-    max_iterations: int | None = None,
+    probability: float = RansacParams.probability,
+    shapes: Sequence[str] = RansacParams.shapes,
+    max_iterations: int | None = RansacParams.max_iterations,
     rng: int | np.random.Generator | None = None,
 ) -> RansacResult:
     """Detect planes, spheres, cylinders, cones and (when asked) tori with Efficient RANSAC.
@@ -596,9 +596,9 @@ def efficient_ransac(
     ([0, 0, 0, 0, 0, 0], 'plane')
     """
     shapes = tuple(shapes) if isinstance(shapes, (list, tuple)) else shapes
-    _validate(dict(epsilon=epsilon, alpha_deg=alpha_deg, cluster_epsilon=cluster_epsilon,
-                   min_support=min_support, probability=probability, shapes=shapes,
-                   max_iterations=max_iterations), "efficient_ransac")
+    check_values(RansacParams, dict(epsilon=epsilon, alpha_deg=alpha_deg, cluster_epsilon=cluster_epsilon,
+                                    min_support=min_support, probability=probability, shapes=shapes,
+                                    max_iterations=max_iterations), "efficient_ransac")
     kinds = tuple(k for k in KINDS if k in shapes)
     rng = np.random.default_rng(rng)
     xyz = np.asarray(xyz, dtype=np.float64)

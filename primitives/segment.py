@@ -16,17 +16,17 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Iterable, Iterator
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
-from hollowtree.errors import ConfigError
 from hollowtree.primitives.blocks import block_context, split_blocks
+from hollowtree.primitives.coarse_params import CoarseParams
 from hollowtree.primitives.dbscan import dbscan_segments, sparse_points
 from hollowtree.primitives.group import segment_contacts
 from hollowtree.primitives.normals import estimate_normals
-from hollowtree.primitives.ransac import RansacParams, efficient_ransac
+from hollowtree.primitives.ransac import efficient_ransac
 from hollowtree.primitives.stitch import UnionFind
 
 __all__ = ["CONTEXT_FACTOR", "PRIMITIVE_CODES", "CoarseParams", "block_inputs", "join_blocks", "join_passes",
@@ -34,180 +34,6 @@ __all__ = ["CONTEXT_FACTOR", "PRIMITIVE_CODES", "CoarseParams", "block_inputs", 
 
 #: Primitive type codes stored per point (0 = no primitive).
 PRIMITIVE_CODES = {"plane": 1, "sphere": 2, "cylinder": 3, "cone": 4, "torus": 5}
-
-
-@dataclass(frozen=True, kw_only=True)
-class CoarseParams:
-    """Parameters of the coarse stage.
-
-    Parameters
-    ----------
-    k : int
-        Neighbours of the PCA normals.
-    ransac : RansacParams
-        Efficient RANSAC settings (epsilon, alpha, minimum support, ...); the stage's
-        default minimum support is 1000 points (small primitives cost most of the time
-        and the tree splits segments further anyway).
-    cluster_epsilon : float or None
-        RANSAC's bitmap cell; None = max(0.15 m, 2/3 of the automatic eps), computed
-        once per store, so sparse far surfaces are not shattered into bitmap islands.
-    eps : float or None
-        DBSCAN radius (metres); None = ``EPS_FACTOR`` (9) x the 25 % quantile of the
-        8-NN spacing over windows of the whole scan (:func:`scan_spacing`), computed once
-        for the whole store so every tile uses the same value.
-    min_samples : int
-        DBSCAN core threshold.
-    free_segments : bool
-        Also split the points that no primitive explains into DBSCAN clusters ("free"
-        segments, primitive code 0), so that small or sparsely scanned elements (a
-        minaret whose stages are each below the minimum support, a small dome) still reach
-        the tree and HollowNet. The paper leaves these points' fate open; without this
-        they stay unsegmented and unlabelled.
-    free_min_points : int
-        Free clusters smaller than this stay unsegmented (scanner noise, stray points).
-    seed : int
-        Base seed; tile t uses ``SeedSequence([seed, t])``.
-    angle_tol_deg, distance_tol, radius_tol : float
-        When two tiles' segments that share points are the same primitive: axes/normals
-        within ``angle_tol_deg``, positions within ``distance_tol`` metres, radii within
-        ``radius_tol`` (relative).
-    block_points : int
-        A tile with more points is segmented in x-y blocks of at most this many points
-        (each with a margin of context around it, each a task of its own), joined like
-        tiles, so that a task's memory follows this bound and not the densest spot of the
-        scan (a tile near a scanner station can hold several times the average). 0 =
-        never. Default 2.2 M, a little over the ingest's average tile (``tile_points``,
-        2 M), so that a tile of about the average stays whole (docs/method.md, "Blocks
-        inside a dense tile").
-    block_margin : float or None
-        Context around a block, metres; None = min(the tile buffer, 2 x the DBSCAN eps).
-        Dense blocks are small (a 1 M-point block near a station can be 3 x 4 m), so a
-        margin as wide as the tile buffer would multiply the points each block processes;
-        one eps was measured too narrow (the join missed, adjusted Rand index 0.70 against
-        whole tiles), two eps enough (0.9995).
-    sparse_factor : float
-        Sparse second pass (docs/method.md): the points the first pass leaves unsegmented
-        whose spacing (to their 8th-nearest neighbour among all points) is at least this many
-        times the scan's (eps / 3) are segmented once more (normals, RANSAC, DBSCAN) with
-        RANSAC's epsilon and cell and the DBSCAN eps multiplied by ``2 x sparse_factor``
-        and the minimum support divided by its square (at least ``free_min_points``);
-        each second-pass segment then joins the first-pass segments of the same primitive
-        it touches. 0 = one pass only.
-    group_gap : float
-        Element groups (docs/method.md): global segments whose points come within this
-        many metres of each other (:func:`primitives.group.segment_contacts`) and that
-        are not large planes are one element group, the unit the tree splits and
-        HollowNet classifies; 0 = every segment is its own group (the paper's reading).
-    group_min_contacts : int
-        Contacts (voxel representatives within ``group_gap``) two segments need.
-    group_max_plane : float
-        A plane whose horizontal extent (bounding-box diagonal in x-y) exceeds this many
-        metres (ground, roofs, facades) is never grouped with its neighbours, except as below;
-        nor is a free segment wider than ``STRIP_FACTOR`` (3) times this (a strip along a
-        facade; :func:`primitives.group.large_segments`).
-    group_set_in : float
-        A segment set in a large wall (it touches a near-vertical large plane, and its
-        bounding box lies within this many metres of the plane and inside the plane's box
-        grown by as much): the jambs and intrados of an arcade's arches in the arcade's
-        face. Such a segment joins that wall (of several, the one it has most contacts
-        with) and none of its other neighbours, so the tree cuts the face into bays with
-        their intrados, and two walls never join through it; 0 = never (coarse-v2).
-    group_stack : float
-        Element groups stacked one on another (the upper one starts at most this many
-        metres above the top of the lower one, their footprints overlap by 70 % of the
-        smaller one and their areas are within 3x; :func:`primitives.group.stacked_pairs`)
-        are one group: a minaret's stages, whose joints its balconies hide from every
-        station. Groups holding a large segment (plane or free strip) are never stacked.
-        0 = never (coarse-v2).
-    """
-
-    k: int = 16
-    ransac: RansacParams = field(default_factory=lambda: RansacParams(min_support=1000))
-    cluster_epsilon: float | None = None
-    eps: float | None = None
-    min_samples: int = 10
-    free_segments: bool = True
-    free_min_points: int = 200
-    seed: int = 0
-    angle_tol_deg: float = 10.0
-    distance_tol: float = 0.15
-    radius_tol: float = 0.15
-    block_points: int = 2_200_000
-    block_margin: float | None = None
-    sparse_factor: float = 2.0
-    group_gap: float = 0.6
-    group_min_contacts: int = 3
-    group_max_plane: float = 6.0
-    group_set_in: float = 1.5
-    group_stack: float = 1.0
-
-    def __post_init__(self) -> None:
-        if not (isinstance(self.sparse_factor, (int, float)) and math.isfinite(self.sparse_factor)
-                and (self.sparse_factor == 0 or self.sparse_factor >= 1)):
-            raise ConfigError(f"The 'sparse_factor' parameter of coarse must be 0 or a float in the range "
-                              f"[1.0, inf). Got {self.sparse_factor!r} instead.")
-        if not (isinstance(self.group_gap, (int, float)) and math.isfinite(self.group_gap) and self.group_gap >= 0):
-            raise ConfigError(f"The 'group_gap' parameter of coarse must be a float in the range [0.0, inf). "
-                              f"Got {self.group_gap!r} instead.")
-        if isinstance(self.group_min_contacts, bool) or not isinstance(self.group_min_contacts, int) \
-                or self.group_min_contacts < 1:
-            raise ConfigError(f"The 'group_min_contacts' parameter of coarse must be an int in the range [1, inf). "
-                              f"Got {self.group_min_contacts!r} instead.")
-        if not (isinstance(self.group_max_plane, (int, float)) and math.isfinite(self.group_max_plane)
-                and self.group_max_plane > 0):
-            raise ConfigError(f"The 'group_max_plane' parameter of coarse must be a float in the range (0.0, inf). "
-                              f"Got {self.group_max_plane!r} instead.")
-        if not (isinstance(self.group_set_in, (int, float)) and math.isfinite(self.group_set_in)
-                and self.group_set_in >= 0):
-            raise ConfigError(f"The 'group_set_in' parameter of coarse must be a float in the range [0.0, inf). "
-                              f"Got {self.group_set_in!r} instead.")
-        if not (isinstance(self.group_stack, (int, float)) and math.isfinite(self.group_stack)
-                and self.group_stack >= 0):
-            raise ConfigError(f"The 'group_stack' parameter of coarse must be a float in the range [0.0, inf). "
-                              f"Got {self.group_stack!r} instead.")
-        if self.block_margin is not None and not (math.isfinite(self.block_margin) and self.block_margin > 0):
-            raise ConfigError(f"The 'block_margin' parameter of coarse must be a float in the range (0.0, inf) "
-                              f"or None. Got {self.block_margin!r} instead.")
-        if isinstance(self.block_points, bool) or not isinstance(self.block_points, int) or self.block_points < 0:
-            raise ConfigError(f"The 'block_points' parameter of coarse must be an int in the range [0, inf). "
-                              f"Got {self.block_points!r} instead.")
-        if not (isinstance(self.k, int) and self.k >= 3):
-            raise ConfigError(f"The 'k' parameter of coarse must be an int in the range [3, inf). Got {self.k!r} instead.")
-        if self.eps is not None and not (math.isfinite(self.eps) and self.eps > 0):
-            raise ConfigError(f"The 'eps' parameter of coarse must be a float in the range (0.0, inf). Got {self.eps!r} instead.")
-        if not (isinstance(self.min_samples, int) and self.min_samples >= 1):
-            raise ConfigError(
-                f"The 'min_samples' parameter of coarse must be an int in the range [1, inf). Got {self.min_samples!r} instead."
-            )
-
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["ransac"] = self.ransac.to_dict()
-        return d
-
-    @classmethod
-    def from_workflow(cls, cp: Any) -> CoarseParams:
-        """From a workflow's ``coarse`` section (``pipeline.workflow.CoarseSection``), which
-        declares every key's default and constraints."""
-        return cls(
-            k=cp.k, ransac=RansacParams(epsilon=cp.epsilon, alpha_deg=cp.alpha, min_support=cp.min_support,
-                                        probability=cp.probability, shapes=tuple(cp.shapes)),
-            cluster_epsilon=cp.cluster_epsilon, eps=cp.eps, min_samples=cp.min_samples, seed=cp.seed,
-            free_segments=cp.free_segments, free_min_points=cp.free_min_points, block_points=cp.block_points,
-            block_margin=cp.block_margin, sparse_factor=cp.sparse_factor, group_gap=cp.group_gap,
-            group_min_contacts=cp.group_min_contacts, group_max_plane=cp.group_max_plane,
-            group_set_in=cp.group_set_in, group_stack=cp.group_stack,
-        )
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> CoarseParams:
-        d = dict(data)
-        d.setdefault("block_points", 0)  # stores written before blocks existed: tiles whole
-        d.setdefault("block_margin", None)
-        d.setdefault("group_gap", 0.0)  # stores written before element groups: one group per segment
-        d.setdefault("sparse_factor", 0.0)  # stores written before the sparse pass: one pass
-        d["ransac"] = RansacParams.from_dict(d["ransac"])
-        return cls(**d)
 
 
 def segment_points(xyz: np.ndarray, params: CoarseParams, eps: float, rng: np.random.Generator,
@@ -267,8 +93,8 @@ def segment_points(xyz: np.ndarray, params: CoarseParams, eps: float, rng: np.ra
             # scan must fit with the same parameters for the stitching to join them.
             f = 2.0 * params.sparse_factor
             r = params.ransac
-            sub = replace(params, ransac=replace(r, epsilon=r.epsilon * f, cluster_epsilon=r.cluster_epsilon * f,
-                                                 min_support=max(params.free_min_points, int(r.min_support / f**2))))
+            sub = replace(params, epsilon=r.epsilon * f, cluster_epsilon=r.cluster_epsilon * f,
+                          min_support=max(params.free_min_points, int(r.min_support / f**2)))
             seg2, fits2, _ = segment_points(xyz[rows], sub, eps * f, rng, sparse_pass=False)
             got = seg2 > 0
             n1 = len(fits)

@@ -43,6 +43,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import least_squares
 
+from hollowtree.primitives.coarse_params import DEFAULT_KINDS, KINDS
 from hollowtree.primitives.torus import (
     torus_distance_and_cosine,
     torus_from_minimal_sets,
@@ -67,11 +68,6 @@ __all__ = [
 
 F64 = npt.NDArray[np.float64]
 
-#: Primitive kinds implemented, in the order candidates are generated.
-KINDS = ("plane", "sphere", "cylinder", "cone", "torus")
-#: Kinds searched by default. Tori are left out: their 4-point minimal sets double the
-#: minimal sets the stopping rule asks for (eq. 2), which slows scenes without tori.
-DEFAULT_KINDS = ("plane", "sphere", "cylinder", "cone")
 #: Points (with normals) that determine one candidate of each kind.
 MINIMAL_SET_SIZE = {"plane": 3, "sphere": 2, "cylinder": 2, "cone": 3, "torus": 4}
 #: Meaning of :attr:`PrimitiveFit.params`, per kind.

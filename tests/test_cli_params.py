@@ -1,15 +1,27 @@
-"""One declaration per parameter: the workflow YAML, the step commands' flags and
-``--set`` give the same stage parameters, with the workflow sections' defaults."""
+"""One declaration per parameter: each stage parameter's default, bounds, choices and
+description are written once, in the stage's params dataclass (``hollowtree.params``);
+the workflow's section, its JSON schema and the step command's flags are derived from
+it, and the workflow YAML, the Python API, the flags and ``--set`` give the same
+parameters."""
 
 from __future__ import annotations
 
 import pytest
+import yaml
 
 from hollowtree.errors import ConfigError
+from hollowtree.params import specs
 from hollowtree.pipeline.cli import _section, build_parser
 from hollowtree.pipeline.coarse import CoarseParams
 from hollowtree.pipeline.tree_stage import TreeStageParams
-from hollowtree.pipeline.workflow import CoarseSection, IngestSection, TreeSection, load_workflow
+from hollowtree.pipeline.workflow import (
+    CoarseSection,
+    IngestSection,
+    TreeSection,
+    WorkflowError,
+    json_schema,
+    load_workflow,
+)
 from hollowtree.tiling.ingest import IngestParams
 
 STAGES = {
@@ -39,17 +51,90 @@ def test_no_flag_is_the_workflows_default(tmp_path, stage):
     assert _cli(stage) == _yaml(tmp_path, stage)
 
 
-@pytest.mark.parametrize(("stage", "flags", "body"), [
-    ("ingest", ["--tile-size", "auto", "--voxel", "0.02", "--units", "ft"], "{voxel: 0.02, units: ft}"),
-    ("ingest", ["--set", "tile_points=500000", "--bbox", "0,0,10,10"], "{tile_points: 500000, bbox: [0, 0, 10, 10]}"),
+PARAMS = {"ingest": IngestParams, "coarse": CoarseParams, "tree": TreeStageParams}
+
+
+@pytest.mark.parametrize(("stage", "flags", "body", "python"), [
+    ("ingest", ["--tile-size", "auto", "--voxel", "0.02", "--units", "ft"], "{voxel: 0.02, units: ft}",
+     {"voxel": 0.02, "units": "ft"}),
+    ("ingest", ["--set", "tile_points=500000", "--bbox", "0,0,10,10"], "{tile_points: 500000, bbox: [0, 0, 10, 10]}",
+     {"tile_points": 500_000, "bbox": [0, 0, 10, 10]}),
     ("coarse", ["--group-gap", "0.3", "--set", "group_stack=0", "--no-free-segments"],
-     "{group_gap: 0.3, group_stack: 0, free_segments: false}"),
-    ("coarse", ["--epsilon", "0.05", "--set", "coarse.shapes=[plane, sphere]"], "{epsilon: 0.05, shapes: [plane, sphere]}"),
-    ("tree", ["--batch-points", "40000", "--set", "look_ahead=false"], "{batch_points: 40000, look_ahead: false}"),
-    ("tree", ["--decision", "energy", "--set", "pillar_max_height=null"], "{decision: energy, pillar_max_height: null}"),
+     "{group_gap: 0.3, group_stack: 0, free_segments: false}", {"group_gap": 0.3, "group_stack": 0, "free_segments": False}),
+    ("coarse", ["--epsilon", "0.05", "--set", "coarse.shapes=[plane, sphere]"], "{epsilon: 0.05, shapes: [plane, sphere]}",
+     {"epsilon": 0.05, "shapes": ["plane", "sphere"]}),
+    ("tree", ["--batch-points", "40000", "--set", "look_ahead=false"], "{batch_points: 40000, look_ahead: false}",
+     {"batch_points": 40_000, "look_ahead": False}),
+    ("tree", ["--decision", "energy", "--set", "pillar_max_height=null"], "{decision: energy, pillar_max_height: null}",
+     {"decision": "energy", "pillar_max_height": None}),
 ])
-def test_flags_and_set_equal_the_yaml(tmp_path, stage, flags, body):
-    assert _cli(stage, *flags) == _yaml(tmp_path, stage, body)
+def test_flags_set_and_python_equal_the_yaml(tmp_path, stage, flags, body, python):
+    params = _yaml(tmp_path, stage, body)
+    assert _cli(stage, *flags) == params
+    assert PARAMS[stage](**python) == params
+    assert params.to_dict() == PARAMS[stage](**python).to_dict()  # the same parameters hash
+
+
+@pytest.mark.parametrize(("stage", "key", "value", "schema_says"), [
+    ("coarse", "min_support", 2, "greater than or equal to 3"),
+    ("coarse", "alpha", 91, "less than or equal to 90"),
+    ("coarse", "sparse_factor", 0.5, "must be 0 or at least 1"),
+    ("ingest", "bbox", [0, 0, -1, 1], "must have xmin < xmax"),
+    ("tree", "decision", "vote", "'split-model' or 'energy'"),
+])
+def test_a_bad_value_is_refused_the_same_everywhere(tmp_path, stage, key, value, schema_says):
+    """The YAML, ``--set`` and the Python API check a value with the same rule."""
+    text = yaml.safe_dump(value, default_flow_style=True).strip().removesuffix("...").strip()
+    with pytest.raises(WorkflowError, match=schema_says):
+        _yaml(tmp_path, stage, f"{{{key}: {text}}}")
+    with pytest.raises(ConfigError, match=schema_says):
+        _cli(stage, "--set", f"{key}={text}")
+    with pytest.raises(ConfigError, match=f"The '{key}' parameter of {stage} must"):
+        PARAMS[stage](**{key: value})
+
+
+def _jsonable(value):
+    return list(value) if isinstance(value, tuple) else value
+
+
+def _bounds(prop: dict) -> dict:
+    """The bounds a JSON schema property states, as ``hollowtree.params`` names them."""
+    names = {"minimum": "ge", "exclusiveMinimum": "gt", "maximum": "le", "exclusiveMaximum": "lt"}
+    out = {}
+    for node in [prop, *prop.get("anyOf", [])]:
+        for n in (node, node.get("items", {})):
+            out.update({names[k]: v for k, v in n.items() if k in names})
+    return out
+
+
+@pytest.mark.parametrize("stage", list(STAGES))
+def test_the_dataclass_is_the_one_declaration(stage):
+    """The JSON schema's section and the step command's flags say what the stage's params
+    dataclass declares: key, default, bounds, choices and description, for every key."""
+    section, _, argv = STAGES[stage]
+    props = json_schema()["$defs"][section.__name__]["properties"]
+    declared = [s for s in specs(PARAMS[stage]) if s.rule.workflow]
+    workflow_only = {"tree": {"enabled", "device"}}.get(stage, set())
+    assert [k for k in section.model_fields if k not in workflow_only] == [s.name for s in declared]
+    assert set(props) == {s.name for s in declared} | workflow_only
+    sub = next(a for a in build_parser()._subparsers._group_actions if argv[0] in a.choices).choices[argv[0]]
+    flags = {a.dest: a for a in sub._actions}
+    for spec in declared:
+        prop = props[spec.name]
+        assert prop["default"] == _jsonable(spec.default), spec.name
+        assert prop["description"] == spec.rule.doc, spec.name
+        assert _bounds(prop) == spec.rule.bounds, spec.name
+        enum = prop.get("enum") or prop.get("items", {}).get("enum")
+        assert enum == (list(spec.rule.choices) if spec.rule.choices else None), spec.name
+        flag = flags.get(spec.name)
+        if flag is not None:  # a flag (the others are --set KEY=VALUE)
+            assert flag.default is None, spec.name
+            assert flag.help.replace("%%", "%").startswith(spec.rule.doc), spec.name
+            d = spec.default
+            if d is not None and not isinstance(d, (bool, tuple)):
+                shown = f"{d:,}" if isinstance(d, int) else f"{d:g}" if isinstance(d, float) else d
+                assert flag.help.endswith(f"(default {shown})"), spec.name
+            assert flag.choices == (list(spec.rule.choices) if spec.rule.choices else None), spec.name
 
 
 @pytest.mark.parametrize(("stage", "flags", "message"), [

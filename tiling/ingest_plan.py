@@ -1,12 +1,12 @@
-"""What an ingest will do, before it reads a point: its parameters (:class:`IngestParams`),
-the tile grid, the store's coordinates and the map units (:func:`plan_ingest` ->
-:class:`IngestPlan`). ``tiling/ingest.py`` runs the plan."""
+"""What an ingest will do, before it reads a point: its parameters (:class:`IngestParams`,
+declared in ``tiling/ingest_params.py``), the tile grid, the store's coordinates and the
+map units (:func:`plan_ingest` -> :class:`IngestPlan`). ``tiling/ingest.py`` runs the plan."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -15,8 +15,8 @@ import numpy as np
 from hollowtree.columns import column_max, column_min
 from hollowtree.errors import ConfigError, CorruptInputError
 from hollowtree.tiling.grid import TileGrid
+from hollowtree.tiling.ingest_params import IngestParams
 from hollowtree.tiling.readers import (
-    UNIT_METRES,
     SourceInfo,
     crs_units,
     probe,
@@ -29,112 +29,6 @@ __all__ = ["IngestParams", "IngestPlan", "MapUnit", "SURFACE_PER_FOOTPRINT", "au
 #: Coordinate resolution for inputs that store floats (PLY, E57): 0.1 mm.
 FLOAT_SOURCE_SCALE = 0.0001
 _INT32_MAX = 2**31 - 1
-
-
-@dataclass(frozen=True, kw_only=True)
-class IngestParams:
-    """Parameters of an ingest; every one is recorded in the store.
-
-    Parameters
-    ----------
-    tile_size : float or None
-        Side of a tile's core, metres. None (the default, ``--tile-size auto``) picks the
-        side from the inputs' extent and point count so that an average tile holds about
-        ``tile_points`` points (a multiple of 5 m, at least 5 m; with ``voxel``, counting at
-        most the points the voxel grid can keep, :func:`auto_tile_size`).
-    tile_points : int
-        Target points per tile for the automatic tile size (default 2 000 000).
-    buffer : float
-        Width of the ring of neighbours' points copied into each tile, metres (default 2).
-    voxel : float or None
-        Keep one point per voxel of this size (metres); None keeps every point.
-    bbox : (xmin, ymin, xmax, ymax) or None
-        Ingest only the tiles whose core intersects this box (world coordinates).
-    tiles : tuple of int or None
-        Ingest only these tile ids.
-    chunk_size : int
-        Records per map unit (sets the map phase's memory: about 150 bytes per record).
-    units : float, str or None
-        Metres per coordinate unit of the inputs, or a unit's name
-        (:data:`tiling.readers.UNIT_METRES`: ``m``, ``ft``, ``us-ft``, ...). None (the
-        default) takes the linear unit of the inputs' CRS (metres where they have none).
-        The store holds metres: every length parameter (here and in later stages) is in
-        metres whatever the input's unit; the exported scan keeps the input's own
-        coordinates. ``bbox`` is in the inputs' coordinates.
-    """
-
-    tile_size: float | None = None
-    buffer: float = 2.0
-    voxel: float | None = None
-    bbox: tuple[float, float, float, float] | None = None
-    tiles: tuple[int, ...] | None = None
-    chunk_size: int = 1_000_000
-    tile_points: int = 2_000_000
-    units: float | str | None = None
-
-    def __post_init__(self) -> None:
-        def bad(name: str, rule: str, value: object) -> ConfigError:
-            return ConfigError(
-                f"The '{name}' parameter of ingest must be {rule}. Got {value!r} instead."
-            )
-
-        if self.tile_size is not None and not (
-            isinstance(self.tile_size, (int, float)) and math.isfinite(self.tile_size) and self.tile_size > 0
-        ):
-            raise bad("tile_size", "a float in the range (0.0, inf) or auto", self.tile_size)
-        limit = math.inf if self.tile_size is None else self.tile_size
-        if not (isinstance(self.buffer, (int, float)) and math.isfinite(self.buffer) and 0 <= self.buffer < limit):
-            raise bad("buffer", f"a float in the range [0.0, tile_size={limit})", self.buffer)
-        if not (isinstance(self.tile_points, int) and self.tile_points > 0):
-            raise bad("tile_points", "an int in the range [1, inf)", self.tile_points)
-        if self.voxel is not None and not (math.isfinite(self.voxel) and self.voxel > 0):
-            raise bad("voxel", "a float in the range (0.0, inf) or None", self.voxel)
-        if self.bbox is not None:
-            b = tuple(float(v) for v in self.bbox)
-            if len(b) != 4 or not all(math.isfinite(v) for v in b) or b[0] >= b[2] or b[1] >= b[3]:
-                raise bad("bbox", "(xmin, ymin, xmax, ymax) with xmin < xmax and ymin < ymax", self.bbox)
-            object.__setattr__(self, "bbox", b)
-        if self.tiles is not None:
-            t = tuple(int(v) for v in self.tiles)
-            if not t or min(t) < 0:
-                raise bad("tiles", "a non-empty list of tile ids >= 0", self.tiles)
-            object.__setattr__(self, "tiles", tuple(sorted(set(t))))
-        if not (isinstance(self.chunk_size, int) and self.chunk_size > 0):
-            raise bad("chunk_size", "an int in the range [1, inf)", self.chunk_size)
-        if isinstance(self.units, str):
-            if self.units.lower() not in UNIT_METRES:
-                raise bad("units", f"metres per coordinate unit or one of {sorted(UNIT_METRES)}", self.units)
-            object.__setattr__(self, "units", UNIT_METRES[self.units.lower()])
-        elif self.units is not None and (isinstance(self.units, bool) or not isinstance(self.units, (int, float))
-                                         or not (math.isfinite(self.units) and self.units > 0)):
-            raise bad("units", f"metres per coordinate unit (> 0) or one of {sorted(UNIT_METRES)}", self.units)
-        elif self.units is not None:
-            object.__setattr__(self, "units", float(self.units))
-
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["bbox"] = list(self.bbox) if self.bbox is not None else None
-        d["tiles"] = list(self.tiles) if self.tiles is not None else None
-        if self.units is None:  # as stores made before the key recorded it
-            del d["units"]
-        return d
-
-    @classmethod
-    def from_workflow(cls, ip: Any) -> IngestParams:
-        """From a workflow's ``ingest`` section (``pipeline.workflow.IngestSection``), which
-        declares every key's default and constraints."""
-        return cls(tile_size=ip.tile_size, tile_points=ip.tile_points, buffer=ip.buffer, voxel=ip.voxel,
-                   bbox=tuple(ip.bbox) if ip.bbox is not None else None,
-                   tiles=tuple(ip.tiles) if ip.tiles is not None else None, chunk_size=ip.chunk_size, units=ip.units)
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> IngestParams:
-        d = dict(data)
-        if d.get("bbox") is not None:
-            d["bbox"] = tuple(d["bbox"])
-        if d.get("tiles") is not None:
-            d["tiles"] = tuple(d["tiles"])
-        return cls(**d)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -47,11 +47,6 @@ def las_crs(header: laspy.LasHeader, path: str | Path) -> Any:
         return None
 
 
-#: Metres per unit of the linear units a user may name (``ingest.units``, ``--units``).
-UNIT_METRES = {"m": 1.0, "metre": 1.0, "meter": 1.0, "cm": 0.01, "mm": 0.001,
-               "ft": 0.3048, "foot": 0.3048, "us-ft": 1200 / 3937, "us_survey_foot": 1200 / 3937}
-
-
 def crs_units(wkt: str | None, path: str | Path = "") -> tuple[tuple[float, float, float], str] | None:
     """Metres per coordinate unit along x, y and z, and the unit's name, from a CRS's WKT;
     None where there is no CRS, it cannot be read (a warning) or names no linear unit.

@@ -41,8 +41,9 @@ import numpy as np
 
 from hollowtree.errors import ConfigError
 from hollowtree.tiling._points import SUFFIXES, PointBlock, SourceInfo, _check_path
+from hollowtree.tiling.ingest_params import UNIT_METRES
 from hollowtree.tiling.read_e57 import _e57_blocks, _probe_e57
-from hollowtree.tiling.read_las import UNIT_METRES, _las_blocks, _probe_las, crs_units, las_crs
+from hollowtree.tiling.read_las import _las_blocks, _probe_las, crs_units, las_crs
 from hollowtree.tiling.read_pdal import _pdal_blocks, _probe_pdal
 from hollowtree.tiling.read_ply import _ply_blocks, _probe_ply
 

@@ -1,0 +1,122 @@
+"""The tree stage's parameters, declared once (``hollowtree.params``):
+:class:`TreeStageParams`, run by ``pipeline/tree_stage.py``. A light module (no NumPy, no
+tree): the workflow's ``tree`` section and the command line's flags are derived from
+these fields.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from hollowtree.errors import ConfigError
+from hollowtree.params import Params, param
+
+__all__ = ["DECISIONS", "DEVICES", "MIN_GROUP_SAMPLE", "TreeStageParams"]
+
+#: How a node's proposal is kept (``TreeStageParams.decision``).
+DECISIONS = ("split-model", "energy")
+#: Where HollowNet runs (``tree.device``): ``auto`` is CUDA where the worker's torch sees a
+#: GPU, else the CPU.
+DEVICES = ("cpu", "cuda", "auto")
+#: The smallest sample a large element group's tree is built on (``max_group_points``).
+MIN_GROUP_SAMPLE = 1000
+
+
+@dataclass(frozen=True, kw_only=True)
+class TreeStageParams(Params, owner="tree"):
+    """Parameters of the tree stage.
+
+    Parameters
+    ----------
+    max_depth : int
+        The paper's ``d``.
+    look_ahead : bool
+        A wall's storeys cut that no proposal beats is kept when one of its storeys with a
+        row of openings would be cut into bays (``tree.build.build_tree(look_ahead=)``).
+    decision : str
+        ``"split-model"`` (the learned split model, ``tree/data/split-v1.json``) or
+        ``"energy"`` (the paper's ``xi = w . e``, ``tree/data/energy-v1.json``).
+    threshold : float or None
+        A split is kept when its score (the split model's probability, or ``xi``) reaches
+        this; None = the model's own.
+    batch_points : int
+        Points per task (small segments are batched; a larger segment is one task).
+    weights : str or None
+        HollowNet weights; None = the shipped default.
+    split_model : str or None
+        The split model's JSON (``hollowtree fit-split --out``); None = the shipped
+        ``tree/data/split-v1.json``.
+    seed : int
+        Segment ``g`` builds its tree with ``SeedSequence([seed, g])``.
+    roof_min_height : float or None
+        A leaf classed ground or roof is roof when its median height above the local
+        ground (``tree/ground.py``) is at least this many metres, else ground; None keeps
+        HollowNet's class.
+    max_group_points : int
+        An element group with more points (a ground plane of a large scan can hold 40 %
+        of it) builds its tree on a seeded random sample of about this many points, and
+        each of its points takes the labels of its nearest sampled point, so a task's
+        memory follows this bound rather than the scan; 0 = never sample.
+    pillar_max_height : float or None
+        A part HollowNet calls pillar that is taller than this many metres is a minaret
+        (``tree/tall.py``: HollowNet cannot see size); None keeps HollowNet's class.
+    other_max_base, other_max_size : float or None
+        A part HollowNet calls other (clutter) whose lowest point is more than
+        ``other_max_base`` metres above the local ground, or that is larger than
+        ``other_max_size`` metres along x, y or z, takes its next most probable class
+        (``tree.tall.not_clutter``); None turns that test off.
+    """
+
+    max_depth: int = param(3, ge=0, doc="maximum depth d of Algorithm 1")
+    look_ahead: bool = param(
+        True, doc="a storeys split that its own score rejects is kept when one of its storeys would split (into "
+                  "bays): a storey cut is judged by what it leads to")
+    decision: str = param(
+        "split-model", choices=DECISIONS,
+        doc="how a node's best proposal is chosen and kept: the learned split model (tree/data/split-v1.json) or "
+            "the paper's energy xi = w . e (tree/data/energy-v1.json)")
+    threshold: float | None = param(
+        None, doc="a split is kept when its score (the split model's probability, or xi) >= this; null = the "
+                  "model's own")
+    batch_points: int = param(200_000, ge=1, doc="points per tree task (small segments are batched)")
+    weights: str | None = param(None, doc="HollowNet weights file; null = the shipped default")
+    split_model: str | None = param(
+        None, doc="split model file (written by hollowtree fit-split); null = the shipped tree/data/split-v1.json")
+    seed: int = param(0, doc="segment g builds its tree with seed [seed, g]")
+    roof_min_height: float | None = param(
+        1.5, ge=0, doc="a part classed ground or roof is roof when its median height above the local ground is at "
+                       "least this (m); null = HollowNet's class as it is")
+    max_group_points: int = param(
+        1_000_000, ge=0,
+        check=lambda v: None if v == 0 or v >= MIN_GROUP_SAMPLE else
+        f"must be 0 (never sample) or at least {MIN_GROUP_SAMPLE}",
+        doc="an element group with more points builds its tree on a seeded sample of this many (0 or at least "
+            "1000); its points take their nearest sampled point's labels (bounded memory); 0 = never sample")
+    pillar_max_height: float | None = param(
+        10.0, gt=0,
+        doc="a part HollowNet calls pillar that is taller than this (m) is a minaret unless its footprint is flat, "
+            "and a minaret instance not taller than this is a pillar (HollowNet cannot see size; its training "
+            "pillars are 2.5-8 m, its minarets 12-40 m); with it on, a dome instance taller than this and more "
+            "than 1.5 times as tall as it is wide is a minaret; null = HollowNet's class as it is")
+    other_max_base: float | None = param(
+        2.0, gt=0,
+        doc="a part HollowNet calls other (clutter) whose lowest point is more than this (m) above the local "
+            "ground takes its next most probable class (clutter stands on the ground; a dome on its drum looks "
+            "like a bush to HollowNet); null = no such test")
+    other_max_size: float | None = param(
+        15.0, gt=0,
+        doc="a part HollowNet calls other (clutter) larger than this (m) along x, y or z takes its next most "
+            "probable class (its largest training clutter, trees, is at most 12 m tall and 11 m wide); null = no "
+            "such test")
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name in ("weights", "split_model"):
+            path = getattr(self, name)
+            if path is not None and not Path(path).is_file():
+                raise ConfigError(f"tree.{name}: file {path} does not exist")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
