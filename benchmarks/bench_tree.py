@@ -56,14 +56,13 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from scipy.spatial import cKDTree  # noqa: E402
-
-from hollowtree.classes import NUM_CLASSES, ClassId  # noqa: E402
+from hollowtree.classes import ClassId  # noqa: E402
 from hollowtree.scenes.scanner import ScanParams, scan  # noqa: E402
 from hollowtree.scenes.sites import build_scene  # noqa: E402
 from hollowtree.tree import build_tree  # noqa: E402
 from hollowtree.tree.operators import TransportCurve, h, p, psi, rho, u, v1, v2  # noqa: E402
 from hollowtree.tree.sequences import SequenceParams, propose, s1, s2, s3  # noqa: E402
+from tests.test_tree_build import StandInClassifier  # noqa: E402  (the tests' stand-in for HollowNet)
 
 SEQ_TARGET_S = 0.050
 TREE_TARGET_S = 1.0
@@ -74,25 +73,6 @@ SEGMENTS = (
     ("curved_arcade", ClassId.ARCH, 0.2),
     ("arcade", ClassId.ARCH, 0.14),
 )
-
-
-class StandInClassifier:
-    """The tests' stand-in for HollowNet (tests/test_tree_build.py): the majority
-    ground-truth class of a segment's points (nearest labelled point) and its share."""
-
-    def __init__(self, xyz: np.ndarray, gt_class: np.ndarray) -> None:
-        self._tree = cKDTree(xyz)
-        self._cls = np.asarray(gt_class, dtype=np.int64)
-
-    def predict(self, segments):
-        cls = np.zeros(len(segments), dtype=np.int64)
-        prob = np.zeros((len(segments), NUM_CLASSES))
-        for i, seg in enumerate(segments):
-            if len(seg):
-                _, j = self._tree.query(np.asarray(seg))
-                prob[i] = np.bincount(self._cls[np.atleast_1d(j)], minlength=NUM_CLASSES) / len(seg)
-            cls[i] = int(np.argmax(prob[i]))
-        return cls, prob[np.arange(len(segments)), cls], prob
 
 
 class Timed:

@@ -104,7 +104,7 @@ def _section(section: Any, args: argparse.Namespace, stage: str, extra: dict[str
         err = exc.errors()[0]
         where = ".".join(str(x) for x in err["loc"])
         got = f" (got {err['input']!r})" if "input" in err and not isinstance(err["input"], dict) else ""
-        raise ConfigError(f"{stage}.{where}: {err['msg']}{got}") from None
+        raise ConfigError(f"{stage}.{where}: {err['msg'].removeprefix('Value error, ')}{got}") from None
 
 
 def _tile_size(text: str) -> float | None:

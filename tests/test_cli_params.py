@@ -140,7 +140,7 @@ def test_the_dataclass_is_the_one_declaration(stage):
 @pytest.mark.parametrize(("stage", "flags", "message"), [
     ("coarse", ["--set", "nope=1"], "--set nope=1: expected KEY=VALUE with KEY a key of the workflow's coarse section"),
     ("coarse", ["--set", "group_gap=-1"], "coarse.group_gap: Input should be greater than or equal to 0 (got -1)"),
-    ("tree", ["--set", "max_group_points=10"], "tree.max_group_points: Value error, must be 0 (never sample) or at least 1000"),
+    ("tree", ["--set", "max_group_points=10"], "tree.max_group_points: must be 0 (never sample) or at least 1000 (got 10)"),
     ("ingest", ["--set", "units=furlong"], "ingest.units"),
 ])
 def test_a_bad_value_is_one_line(stage, flags, message):
