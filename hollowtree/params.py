@@ -33,7 +33,7 @@ from typing import Any, ClassVar
 
 from hollowtree.errors import ConfigError
 
-__all__ = ["Params", "Rule", "Spec", "check_values", "like", "param", "specs", "validate"]
+__all__ = ["Params", "Rule", "Spec", "arg", "check_args", "check_values", "like", "param", "specs", "validate"]
 
 _MISSING: Any = dataclasses.MISSING
 
@@ -222,6 +222,27 @@ def check_values(cls: type, values: Mapping[str, Any], owner: str) -> dict[str, 
             raise ConfigError(f"The '{spec.name}' parameter of {owner} {problem}. Got {v!r} instead.")
         out[spec.name] = norm
     return out
+
+
+def arg(kind: type, *, none_ok: bool = False, gt: float | None = None, ge: float | None = None,
+        lt: float | None = None, le: float | None = None) -> Spec:
+    """The rule of a kernel function's keyword (a number), for :func:`check_args`:
+    ``arg(float, gt=0)``."""
+    return Spec("", None, Rule(doc="", gt=gt, ge=ge, lt=lt, le=le), none_ok, (kind,))
+
+
+def check_args(rules: Mapping[str, Spec], func: str, **values: Any) -> None:
+    """Check a kernel function's keywords against its table of :func:`arg` rules.
+
+    Raises
+    ------
+    ConfigError
+        ``The 'eps' parameter of FUNC must be a float in the range (0.0, inf). Got 0 instead.``
+    """
+    for name, value in values.items():
+        spec = rules[name]
+        if not _value(spec, value)[0]:
+            raise ConfigError(f"The '{name}' parameter of {func} must be {_describe(spec)}. Got {value!r} instead.")
 
 
 def validate(obj: Any, owner: str) -> None:

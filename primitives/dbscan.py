@@ -30,6 +30,7 @@ from scipy.spatial import cKDTree
 
 from hollowtree.columns import column_min
 from hollowtree.errors import ConfigError
+from hollowtree.params import arg, check_args
 from hollowtree.primitives._validation import as_xyz as _as_xyz
 from hollowtree.primitives.stitch import UnionFind
 
@@ -46,29 +47,8 @@ _QUERY_BUDGET = 1 << 20
 
 # -- parameter rules, declared once --------------------------------------------------------
 
-# name -> (type word, lower bound, lower bound included)
-_PARAMETER_CONSTRAINTS: dict[str, tuple[str, float, bool]] = {
-    "eps": ("float", 0.0, False),
-    "min_samples": ("int", 1, True),
-    "k": ("int", 1, True),
-    "factor": ("float", 0.0, False),
-    "quantile": ("float", 0.0, False),
-}
-
-
-def _check_params(func: str, **values: object) -> None:
-    for name, value in values.items():
-        kind, low, closed = _PARAMETER_CONSTRAINTS[name]
-        is_int = isinstance(value, (int, np.integer)) and not isinstance(value, bool)
-        is_num = is_int or isinstance(value, (float, np.floating))
-        ok = (is_int if kind == "int" else is_num) and math.isfinite(value)  # type: ignore[arg-type]
-        ok = ok and (value >= low if closed else value > low)  # type: ignore[operator]
-        if not ok:
-            article = "an" if kind == "int" else "a"
-            raise ConfigError(
-                f"The '{name}' parameter of {func} must be {article} {kind} in the range "
-                f"{'[' if closed else '('}{low}, inf). Got {value!r} instead."
-            )
+_RULES = {"eps": arg(float, gt=0), "min_samples": arg(int, ge=1), "k": arg(int, ge=1), "factor": arg(float, gt=0),
+          "quantile": arg(float, gt=0, le=1)}
 
 
 # -- public kernels ------------------------------------------------------------------------
@@ -117,7 +97,7 @@ def dbscan_labels(xyz: npt.ArrayLike, *, eps: float, min_samples: int) -> npt.ND
     [0, 0, 0, 1, 1, -1]
     """
     func = "dbscan_labels"
-    _check_params(func, eps=eps, min_samples=min_samples)
+    check_args(_RULES, func, eps=eps, min_samples=min_samples)
     pts = _as_xyz(xyz, func)
     eps, min_samples = float(eps), int(min_samples)
     n = len(pts)
@@ -200,7 +180,7 @@ def default_eps(xyz: npt.ArrayLike, *, k: int = 8, factor: float = 3.0) -> float
     3.0
     """
     func = "default_eps"
-    _check_params(func, k=k, factor=factor)
+    check_args(_RULES, func, k=k, factor=factor)
     pts = _as_xyz(xyz, func)
     k = int(k)
     if len(pts) <= k:
@@ -254,7 +234,7 @@ def dbscan_segments(
     [1, 1, 2, 2, 0, 0]
     """
     func = "dbscan_segments"
-    _check_params(func, eps=eps, min_samples=min_samples)
+    check_args(_RULES, func, eps=eps, min_samples=min_samples)
     pts = _as_xyz(xyz, func)
     prim = np.asarray(primitive_labels)
     if prim.shape != (len(pts),) or not (np.issubdtype(prim.dtype, np.integer) or prim.size == 0):
@@ -533,10 +513,7 @@ def window_spacing(windows: Iterable[tuple[npt.ArrayLike, npt.ArrayLike]], *, k:
     1.0
     """
     func = "window_spacing"
-    _check_params(func, k=k, quantile=quantile)
-    if quantile > 1:
-        raise ConfigError(f"The 'quantile' parameter of {func} must be a float in the range (0.0, 1.0]. "
-                          f"Got {quantile!r} instead.")
+    check_args(_RULES, func, k=k, quantile=quantile)
     k = int(k)
     found = []
     for xyz, mask in windows:

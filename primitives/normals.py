@@ -23,6 +23,7 @@ import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 from hollowtree.errors import ConfigError
+from hollowtree.params import arg, check_args
 from hollowtree.primitives._validation import as_xyz as _as_xyz
 
 __all__ = ["NormalResult", "estimate_normals"]
@@ -73,32 +74,7 @@ class NormalResult:
 
 # -- parameter rules, declared once --------------------------------------------------------
 
-# name -> (type word, lower bound, lower closed, allows None)
-_PARAMETER_CONSTRAINTS: dict[str, tuple[str, float, bool, bool]] = {
-    "k": ("int", 3, True, False),
-    "radius": ("float", 0.0, False, True),
-}
-
-
-def _check_params(func: str, **values: object) -> None:
-    for name, value in values.items():
-        kind, low, closed, none_ok = _PARAMETER_CONSTRAINTS[name]
-        if value is None and none_ok:
-            continue
-        is_int = isinstance(value, (int, np.integer)) and not isinstance(value, bool)
-        is_num = is_int or isinstance(value, (float, np.floating))
-        ok = (is_int if kind == "int" else is_num) and (
-            value >= low if closed else value > low  # type: ignore[operator]
-        )
-        if kind == "float" and ok:
-            ok = math.isfinite(float(value))  # type: ignore[arg-type]
-        if not ok:
-            bounds = f"{'[' if closed else '('}{low}, inf)"
-            article = "an" if kind == "int" else "a"
-            raise ConfigError(
-                f"The '{name}' parameter of {func} must be {article} {kind} in the range "
-                f"{bounds}{' or None' if none_ok else ''}. Got {value!r} instead."
-            )
+_RULES = {"k": arg(int, ge=3), "radius": arg(float, gt=0, none_ok=True)}
 
 
 # -- the kernel ----------------------------------------------------------------------------
@@ -170,7 +146,7 @@ def estimate_normals(
     ([0.0, 0.0, 1.0], 0.0, True)
     """
     func = "estimate_normals"
-    _check_params(func, k=k, radius=radius)
+    check_args(_RULES, func, k=k, radius=radius)
     pts = _as_xyz(xyz, func)
     n = len(pts)
     station = _station_of(viewpoints, viewpoint_index, n, func)
