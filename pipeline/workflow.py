@@ -143,13 +143,12 @@ def _section(name: str, params: type, doc: str, extra: dict[str, tuple[str | Non
 
 
 IngestSection = _section("IngestSection", IngestParams,
-                         "``hollowtree ingest`` parameters (``IngestParams``, tiling/ingest_params.py).")
+                         "``hollowtree ingest`` parameters (tiling/ingest.py ``IngestParams``).")
 CoarseSection = _section("CoarseSection", CoarseParams,
-                         "``hollowtree coarse`` parameters (``CoarseParams``, primitives/coarse_params.py).")
+                         "``hollowtree coarse`` parameters (pipeline/coarse.py ``CoarseParams``).")
 TreeSection = _section(
     "TreeSection", TreeStageParams,
-    "The hierarchical tree (``TreeStageParams``, pipeline/tree_params.py): ``enabled: false`` stops after the "
-    "coarse stage.",
+    "The hierarchical tree (tree/): ``enabled: false`` stops after the coarse stage.",
     {"enabled": (None, bool, Field(True, description="run the tree + HollowNet stage")),
      "device": ("weights", Literal[DEVICES], Field(
          "cpu", description="where HollowNet runs in each worker: cpu, cuda, or auto (CUDA where the worker's "
