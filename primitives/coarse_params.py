@@ -12,10 +12,15 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from hollowtree.errors import ConfigError
-from hollowtree.params import Params, like, param
+from hollowtree.params import Params, arg, like, param
 
-__all__ = ["DEFAULT_KINDS", "KINDS", "CoarseParams", "RansacParams"]
+__all__ = ["DBSCAN_ARGS", "DEFAULT_KINDS", "KINDS", "NORMALS_ARGS", "CoarseParams", "RansacParams"]
 
+#: The rules of the keywords of ``primitives/normals.py`` and ``primitives/dbscan.py``
+#: (their checks, and the stage's parameters that are passed on to them).
+NORMALS_ARGS = {"k": arg(int, ge=3), "radius": arg(float, gt=0, none_ok=True)}
+DBSCAN_ARGS = {"eps": arg(float, gt=0), "min_samples": arg(int, ge=1), "k": arg(int, ge=1),
+               "factor": arg(float, gt=0), "quantile": arg(float, gt=0, le=1)}
 #: Primitive kinds implemented, in the order candidates are generated.
 KINDS = ("plane", "sphere", "cylinder", "cone", "torus")
 #: Kinds searched by default. Tori are left out: their 4-point minimal sets double the
@@ -150,7 +155,7 @@ class CoarseParams(Params, owner="coarse"):
         0 = never (coarse-v2).
     """
 
-    k: int = param(16, ge=3, doc="neighbours of the PCA normals")
+    k: int = param(16, **NORMALS_ARGS["k"].rule.bounds, doc="neighbours of the PCA normals")
     epsilon: float = like(RansacParams, "epsilon")
     alpha: float = like(RansacParams, "alpha_deg")
     cluster_epsilon: float | None = like(
@@ -158,8 +163,9 @@ class CoarseParams(Params, owner="coarse"):
     min_support: int = like(RansacParams, "min_support", 1000)
     probability: float = like(RansacParams, "probability")
     shapes: tuple[str, ...] = like(RansacParams, "shapes")
-    eps: float | None = param(None, gt=0, doc="DBSCAN radius, metres; null = 9 x the scan's 25 % 8-NN spacing")
-    min_samples: int = param(10, ge=1, doc="DBSCAN core threshold")
+    eps: float | None = param(None, **DBSCAN_ARGS["eps"].rule.bounds,
+                              doc="DBSCAN radius, metres; null = 9 x the scan's 25 % 8-NN spacing")
+    min_samples: int = param(10, **DBSCAN_ARGS["min_samples"].rule.bounds, doc="DBSCAN core threshold")
     free_segments: bool = param(True, doc="cluster the points no primitive explains into free segments too")
     free_min_points: int = param(200, ge=1, doc="smallest free segment, points")
     seed: int = param(0, doc="base seed; tile t uses [seed, t]")

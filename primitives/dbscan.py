@@ -30,8 +30,9 @@ from scipy.spatial import cKDTree
 
 from hollowtree.columns import column_min
 from hollowtree.errors import ConfigError
-from hollowtree.params import arg, check_args
+from hollowtree.params import check_args
 from hollowtree.primitives._validation import as_xyz as _as_xyz
+from hollowtree.primitives.coarse_params import DBSCAN_ARGS
 from hollowtree.primitives.stitch import UnionFind
 
 __all__ = ["dbscan_labels", "dbscan_segments", "default_eps", "sparse_points", "window_spacing"]
@@ -44,12 +45,6 @@ _BIG_PAIR = 4096
 _SUBSAMPLE = 4
 # Neighbour entries per k-d tree query chunk (about 50 bytes each with temporaries).
 _QUERY_BUDGET = 1 << 20
-
-# -- parameter rules, declared once --------------------------------------------------------
-
-_RULES = {"eps": arg(float, gt=0), "min_samples": arg(int, ge=1), "k": arg(int, ge=1), "factor": arg(float, gt=0),
-          "quantile": arg(float, gt=0, le=1)}
-
 
 # -- public kernels ------------------------------------------------------------------------
 
@@ -97,7 +92,7 @@ def dbscan_labels(xyz: npt.ArrayLike, *, eps: float, min_samples: int) -> npt.ND
     [0, 0, 0, 1, 1, -1]
     """
     func = "dbscan_labels"
-    check_args(_RULES, func, eps=eps, min_samples=min_samples)
+    check_args(DBSCAN_ARGS, func, eps=eps, min_samples=min_samples)
     pts = _as_xyz(xyz, func)
     eps, min_samples = float(eps), int(min_samples)
     n = len(pts)
@@ -180,7 +175,7 @@ def default_eps(xyz: npt.ArrayLike, *, k: int = 8, factor: float = 3.0) -> float
     3.0
     """
     func = "default_eps"
-    check_args(_RULES, func, k=k, factor=factor)
+    check_args(DBSCAN_ARGS, func, k=k, factor=factor)
     pts = _as_xyz(xyz, func)
     k = int(k)
     if len(pts) <= k:
@@ -234,7 +229,7 @@ def dbscan_segments(
     [1, 1, 2, 2, 0, 0]
     """
     func = "dbscan_segments"
-    check_args(_RULES, func, eps=eps, min_samples=min_samples)
+    check_args(DBSCAN_ARGS, func, eps=eps, min_samples=min_samples)
     pts = _as_xyz(xyz, func)
     prim = np.asarray(primitive_labels)
     if prim.shape != (len(pts),) or not (np.issubdtype(prim.dtype, np.integer) or prim.size == 0):
@@ -513,7 +508,7 @@ def window_spacing(windows: Iterable[tuple[npt.ArrayLike, npt.ArrayLike]], *, k:
     1.0
     """
     func = "window_spacing"
-    check_args(_RULES, func, k=k, quantile=quantile)
+    check_args(DBSCAN_ARGS, func, k=k, quantile=quantile)
     k = int(k)
     found = []
     for xyz, mask in windows:

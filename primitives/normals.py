@@ -23,8 +23,9 @@ import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 from hollowtree.errors import ConfigError
-from hollowtree.params import arg, check_args
+from hollowtree.params import check_args
 from hollowtree.primitives._validation import as_xyz as _as_xyz
+from hollowtree.primitives.coarse_params import NORMALS_ARGS, CoarseParams
 
 __all__ = ["NormalResult", "estimate_normals"]
 
@@ -72,18 +73,13 @@ class NormalResult:
         )
 
 
-# -- parameter rules, declared once --------------------------------------------------------
-
-_RULES = {"k": arg(int, ge=3), "radius": arg(float, gt=0, none_ok=True)}
-
-
 # -- the kernel ----------------------------------------------------------------------------
 
 
 def estimate_normals(
     xyz: npt.ArrayLike,
     *,
-    k: int = 16,
+    k: int = CoarseParams.k,
     radius: float | None = None,
     viewpoints: npt.ArrayLike | None = None,
     viewpoint_index: npt.ArrayLike | None = None,
@@ -146,7 +142,7 @@ def estimate_normals(
     ([0.0, 0.0, 1.0], 0.0, True)
     """
     func = "estimate_normals"
-    check_args(_RULES, func, k=k, radius=radius)
+    check_args(NORMALS_ARGS, func, k=k, radius=radius)
     pts = _as_xyz(xyz, func)
     n = len(pts)
     station = _station_of(viewpoints, viewpoint_index, n, func)
