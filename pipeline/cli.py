@@ -28,6 +28,7 @@ from hollowtree.pipeline.cli_args import (
     _stage_flag,
     _tile_size,
     _units,
+    _workers_flag,
 )
 
 __all__ = ["main", "build_parser"]
@@ -152,7 +153,7 @@ def build_parser() -> argparse.ArgumentParser:
     _set_flag(g, "ingest")
     g.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process; "
                    "default: a local cluster of worker threads in this process")
-    g.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
+    _workers_flag(g)
     g.add_argument("--processes", action="store_true",
                    help="make the local cluster's workers processes, not threads (starts about 1.5 s slower)")
     g.add_argument("--no-progress", action="store_true", help="no progress bars")

@@ -65,10 +65,18 @@ def _one_flag(parser: argparse.ArgumentParser, section: Any, key: str, **kwargs:
     parser.add_argument(f"--{key.replace('_', '-')}", dest=key, default=None, help=text, **kwargs)
 
 
+def _workers_flag(parser: argparse.ArgumentParser) -> None:
+    """``--workers``, with the workflow's default (``cluster.workers``)."""
+    from hollowtree.pipeline.workflow import ClusterSection
+
+    n = ClusterSection.model_fields["workers"].default
+    parser.add_argument("--workers", type=_positive_int, default=n, help=f"local cluster workers (default {n})")
+
+
 def _cluster_args(parser: argparse.ArgumentParser) -> None:
     """Where a step command's tasks run, and its progress bars."""
     parser.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process")
-    parser.add_argument("--workers", type=_positive_int, default=2, help="local cluster workers (default 2)")
+    _workers_flag(parser)
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
