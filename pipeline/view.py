@@ -105,6 +105,9 @@ class _Handler(BaseHTTPRequestHandler):
                 return self._send(200, body, "application/octet-stream", head=head)
             if path == "/api/element":
                 return self._json(v.element(_int(q, "instance"), _int(q, "segment"), _int(q, "leaf")), head=head)
+            if path == "/api/stats":  # what the server has read so far (benchmarks/bench_view.py)
+                return self._json({"chunk_reads": v.chunk_reads, "bytes_read": v.bytes_read,
+                                   "cached_tiles": len(v._parts)}, head=head)
             if path == "/api/tree":
                 roots, total = v.tree().roots(_int(q, "limit", 300))
                 return self._json({"roots": roots, "total": total}, head=head)

@@ -14,9 +14,7 @@ from typing import Any
 import numpy as np
 
 from hollowtree.classes import CLASS_NAMES, NUM_CLASSES
-from hollowtree.errors import ConfigError
-from hollowtree.pipeline.export import CLASS_COLOURS
-from hollowtree.pipeline.labels import LEAF_BITS, require_labels
+from hollowtree.errors import ConfigError, PipelineError
 from hollowtree.pipeline.view_lod import (
     LEVELS,
     first_view,
@@ -27,8 +25,17 @@ from hollowtree.pipeline.view_lod import (
 )
 from hollowtree.tiling.store import CHUNK_POINTS, RunStore
 
-__all__ = ["ViewStore", "SEQUENCES", "PARTS_CACHE_BYTES"]
+__all__ = ["ViewStore", "SEQUENCES", "PARTS_CACHE_BYTES", "LEAF_BITS", "CLASS_RGB"]
 
+#: ``labels/segment = coarse segment << LEAF_BITS | tree leaf`` (``pipeline.labels.LEAF_BITS``;
+#: not imported: pipeline.labels loads the whole pipeline, 2 s before the server could listen).
+LEAF_BITS = 20
+#: The class colours of ``pipeline.export.CLASS_COLOURS`` (the PNG views), RGB 0-255; the
+#: tests check that they agree.
+CLASS_RGB = ((191, 191, 191), (140, 115, 76), (217, 178, 128), (153, 51, 51), (26, 115, 217),
+             (242, 140, 13), (38, 166, 64), (153, 64, 191), (89, 89, 89))
+#: The labels stage's name (``pipeline.labels.STAGE``).
+LABELS_STAGE = "labels"
 #: Names of the tree table's ``sequence`` codes (docs/store.md, the tree stage).
 SEQUENCES = {0: "root", 1: "S1", 2: "S2", 3: "S3", 5: "gaps", 6: "parts"}
 #: Bytes of tile labels (``labels/parts``) kept between requests.
@@ -42,8 +49,10 @@ class ViewStore:
     def __init__(self, url: str) -> None:
         self.url = str(url)
         self.store = RunStore.open(self.url)
-        require_labels(self.store)
         attrs = self.store.attrs
+        lab = attrs.get("stages", {}).get(LABELS_STAGE)
+        if not lab or lab.get("done") != lab.get("units"):  # pipeline.labels.require_labels
+            raise PipelineError(f"store {self.url} has no complete labels; run `hollowtree run` first")
         self.scale = np.asarray(attrs["coords"]["scale"], dtype=np.float64)
         self.offset = np.asarray(attrs["coords"]["offset"], dtype=np.float64)
         self.fields = attrs.get("fields", {})
@@ -55,8 +64,8 @@ class ViewStore:
         self._parts_bytes = 0
         self._instances: np.ndarray | None = None
         self._tree: _Tree | None = None
-        h = attrs["stages"]["labels"].get("params_hash")
-        recs = self.store.records("labels")
+        h = lab.get("params_hash")
+        recs = self.store.records(LABELS_STAGE)
         counts = np.zeros(NUM_CLASSES, np.int64)
         for info in recs.values():
             if h is None or info.get("params_hash") == h:
@@ -91,7 +100,7 @@ class ViewStore:
             "nodes": self.nodes, "first_view": first_view(self.nodes),
             "tiles": {str(t): self._tile_box(t) for t in self.tiles},
             "classes": [{"id": c, "name": CLASS_NAMES[c], "count": int(self.counts[c]),
-                         "colour": [int(round(255 * v)) for v in CLASS_COLOURS[c]]} for c in range(NUM_CLASSES)],
+                         "colour": list(CLASS_RGB[c])} for c in range(NUM_CLASSES)],
             "has_rgb": "rgb" in self.fields, "has_intensity": "intensity" in self.fields,
             "leaf_bits": LEAF_BITS,
         }

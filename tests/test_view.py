@@ -90,6 +90,17 @@ def test_first_view_is_bounded_whatever_the_store_size():
         assert sum(np.ceil(262_144 * 2.0 ** (p["level"] - LEVELS + 1)) for p in plan) <= FIRST_POINTS
 
 
+def test_the_viewer_agrees_with_the_pipeline_constants():
+    """view_store copies three constants so that the server starts without the pipeline."""
+    from hollowtree.pipeline import labels
+    from hollowtree.pipeline.export import CLASS_COLOURS
+    from hollowtree.pipeline.view_store import CLASS_RGB, LABELS_STAGE, LEAF_BITS
+
+    assert LEAF_BITS == labels.LEAF_BITS
+    assert LABELS_STAGE == labels.STAGE
+    assert [tuple(int(round(255 * v)) for v in c) for c in CLASS_COLOURS] == list(CLASS_RGB)
+
+
 def test_pack_round_trip():
     a = {"p": np.arange(12, dtype=np.float32).reshape(4, 3), "c": np.array([1, 2, 3], np.uint8),
          "i": np.array([7, 8], np.uint32)}
@@ -265,8 +276,14 @@ def test_clicking_a_dome_point_shows_its_element_and_tree_path(page, store):
     scan = hollowtree.open(store)
     index, xyz = scan.points()
     cls = scan.class_id[index]
+    from scipy.spatial import cKDTree
+
     dome = np.flatnonzero(cls == ClassId.DOME)
-    dome = dome[np.argsort(-xyz[dome, 2], kind="stable")][:3000]  # highest first: in front of everything from above
+    # points inside a dome's surface (every point within 0.5 m is dome), highest first: in
+    # front of everything from above
+    near = cKDTree(xyz).query_ball_point(xyz[dome], 0.5)
+    dome = dome[[bool((cls[n] == ClassId.DOME).all()) for n in near]]
+    dome = dome[np.argsort(-xyz[dome, 2], kind="stable")][:3000]
     screen = np.asarray(pg.evaluate("ps => ps.map(p => window.hollowtreeViewer.project(p[0], p[1], p[2]))",
                                     xyz[dome].tolist()))
     box = pg.locator("canvas").bounding_box()
@@ -287,3 +304,47 @@ def test_clicking_a_dome_point_shows_its_element_and_tree_path(page, store):
     text = pg.inner_text("#element")
     assert "dome" in text
     assert "root to leaf" in text
+
+
+def test_a_store_on_s3_gives_the_same_view(server, store, monkeypatch):
+    """The same store on S3 (a moto server): the same counts, nodes and tree paths."""
+    pytest.importorskip("moto", reason="moto[server] is a dev dependency")
+    s3fs = pytest.importorskip("s3fs", reason="s3fs is a dev dependency")
+    import socket
+    import time
+
+    from hollowtree.pipeline.view_store import ViewStore
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    moto = subprocess.Popen([sys.executable, "-m", "moto.server", "-H", "127.0.0.1", "-p", str(port)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        for _ in range(100):
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+                break
+            except OSError:
+                time.sleep(0.1)
+        env = {"AWS_ACCESS_KEY_ID": "test", "AWS_SECRET_ACCESS_KEY": "test", "AWS_DEFAULT_REGION": "us-east-1",
+               "AWS_ENDPOINT_URL": f"http://127.0.0.1:{port}"}
+        for k, v in env.items():
+            monkeypatch.setenv(k, v)
+        fs = s3fs.S3FileSystem(key="test", secret="test", endpoint_url=env["AWS_ENDPOINT_URL"])
+        fs.mkdir("hollowtree-view")
+        fs.put(store.rstrip("/") + "/", "hollowtree-view/s.zarr", recursive=True)
+        remote = ViewStore("s3://hollowtree-view/s.zarr")
+        local = server.view
+        assert remote.counts.tolist() == local.counts.tolist()
+        assert remote.nodes == local.nodes
+        nd = local.nodes[-1]
+        _, a = unpack(remote.node(nd["tile"], nd["chunk"], 2, 0))
+        _, b = unpack(local.node(nd["tile"], nd["chunk"], 2, 0))
+        for k in b:
+            np.testing.assert_array_equal(a[k], b[k])
+        roots, _ = remote.tree().roots(5)
+        assert roots == local.tree().roots(5)[0]
+    finally:
+        moto.kill()
+        moto.wait()

@@ -182,6 +182,7 @@
     for (const b of bs) {
       const s = new Float32Array(b.n);
       for (let i = 0; i < b.n; i++) s[i] = c / Math.sqrt(counts[key(b.pos, i)]);
+      b.sp = s;
       gl.bindBuffer(gl.ARRAY_BUFFER, b.gs); gl.bufferData(gl.ARRAY_BUFFER, s, gl.STATIC_DRAW);
     }
   }
@@ -282,11 +283,14 @@
     const sx = (m[0] * p[0] + m[4] * p[1] + m[8] * p[2] + m[12]) / cw, sy = (m[1] * p[0] + m[5] * p[1] + m[9] * p[2] + m[13]) / cw;
     return [r.left + (sx + 1) / 2 * r.width, r.top + (1 - sy) / 2 * r.height];
   };
+  // the point drawn at a pixel: of the points whose square covers it (the shader's size), the
+  // nearest to the eye; where none covers it, the nearest within 6 pixels
   function pick(cx, cy) {
-    const r = canvas.getBoundingClientRect(), m = mvp();
+    const r = canvas.getBoundingClientRect(), m = mvp(), dpr = window.devicePixelRatio || 1;
     const px = (cx - r.left) / r.width * 2 - 1, py = 1 - (cy - r.top) / r.height * 2;
-    const tol = 6 / r.width * 2, toly = 6 / r.height * 2;
-    let best = null, bestD = Infinity;
+    const proj = canvas.height / (2 * Math.tan(cam.fov / 2)), toPx = r.width / 2;
+    const tol = 6 / toPx, toly = 6 / (r.height / 2);
+    let best = null, bestD = Infinity, near = null, nearD = Infinity;
     for (const b of V.batches) {
       const p = b.pos;
       for (let i = 0; i < b.n; i++) {
@@ -298,11 +302,14 @@
         if (dx > tol || dx < -tol) continue;
         const dy = (m[1] * x + m[5] * y + m[9] * z + m[13]) / cw - py;
         if (dy > toly || dy < -toly) continue;
-        const d = cw + 0.02 * cw * Math.hypot(dx / tol, dy / toly); // nearest to the eye, then to the cursor
-        if (d < bestD) { bestD = d; best = [b, i]; }
+        const size = pointSize * dpr, sp = b.sp ? b.sp[i] : 0;
+        const half = Math.min(Math.max(size, size / 4 * 1.2 * sp * proj / cw), 5 * size) / 2 / dpr; // CSS pixels
+        const ex = Math.abs(dx) * toPx, ey = Math.abs(dy) * r.height / 2;
+        if (ex <= half + 0.5 && ey <= half + 0.5) { if (cw < bestD) { bestD = cw; best = [b, i]; } }
+        else { const d = Math.hypot(ex, ey); if (d < nearD) { nearD = d; near = [b, i]; } }
       }
     }
-    return best;
+    return best || near;
   }
   const fmt = (v, d = 3) => (v === null || v === undefined ? "–" : typeof v === "number" ? +v.toFixed(d) : v);
   async function select(cx, cy) {
