@@ -85,9 +85,14 @@ def test_relative_links_resolve():
 
 
 def test_sizes():
-    pages = {p.relative_to(REPO).as_posix(): p.stat().st_size for p in DOCS.rglob("*") if p.is_file()}
+    files = [p for p in DOCS.rglob("*") if p.is_file()]
+    pages = {p.relative_to(REPO).as_posix(): p.stat().st_size for p in files if p.suffix != ".png"}
     assert sum(pages.values()) < 150_000, pages
     assert max(pages.values()) < 40_000, pages
+    # screenshots (docs/img/, e.g. docs/view.md's): a budget of their own
+    images = {p.relative_to(REPO).as_posix(): p.stat().st_size for p in files if p.suffix == ".png"}
+    assert all(p.startswith("docs/img/") for p in images), images
+    assert max(images.values(), default=0) < 300_000, images
     assert (REPO / "README.md").stat().st_size < 10_000
 
 
