@@ -62,6 +62,10 @@ class TreeStageParams(Params, owner="tree"):
     pillar_max_height : float or None
         A part HollowNet calls pillar that is taller than this many metres is a minaret
         (``tree/tall.py``: HollowNet cannot see size); None keeps HollowNet's class.
+    verify : bool
+        Run the element check (``tree/verify.py``) on every element instance after the merge.
+    verify_model : str or None
+        The element check's JSON; None = the shipped ``tree/data/verify-v1.json``.
     other_max_base, other_max_size : float or None
         A part HollowNet calls other (clutter) whose lowest point is more than
         ``other_max_base`` metres above the local ground, or that is larger than
@@ -111,9 +115,16 @@ class TreeStageParams(Params, owner="tree"):
             "probable class (its largest training clutter, trees, is at most 12 m tall and 11 m wide); null = no "
             "such test")
 
+    verify: bool = param(
+        False, doc="the element check (tree/verify.py): a learned decision on every element instance after the "
+                   "merge, from its class, score, points, box and height above the ground; an instance it does not "
+                   "believe becomes other, or takes the element class it believes")
+    verify_model: str | None = param(
+        None, doc="the element check's file (benchmarks/fit_verify.py); null = the shipped tree/data/verify-v1.json")
+
     def __post_init__(self) -> None:
         super().__post_init__()
-        for name in ("weights", "split_model"):
+        for name in ("weights", "split_model", "verify_model"):
             path = getattr(self, name)
             if path is not None and not Path(path).is_file():
                 raise ConfigError(f"tree.{name}: file {path} does not exist")

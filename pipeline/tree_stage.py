@@ -386,6 +386,8 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any, device: str = "c
             tables.append(t)
         nodes = pa.concat_tables(tables) if tables else None
         imap, cmap = _merge_map(nodes, int(inst_offsets[-1]))
+        if nodes is not None and params.verify:
+            _check_elements(nodes, imap, cmap, _ground_levels(store), params.verify_model)
         cells = _arcade_rows(store, len(batches), inst_offsets, imap, cmap)
         store.write_unit(ROWS.rsplit("/", 1)[0], cells.to_arrays())
         if nodes is not None:
@@ -450,6 +452,40 @@ def _arcade_rows(store: RunStore, n_batches: int, inst_offsets: np.ndarray, imap
     return ArcadeCells(*(np.concatenate([x, y]) for x, y in ((cells.frame, frames.frame), (cells.box, frames.box),
                                                              (cells.instance, frames.instance),
                                                              (cells.take, frames.take), (cells.trim, frames.trim))))
+
+
+def element_instances(nodes: pa.Table, imap: np.ndarray, cmap: np.ndarray,
+                      ground: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`tree.verify.instance_features` of the element instances after the merge
+    (``imap`` and ``cmap`` of :func:`_merge_map`; ``nodes`` with batch-global instances),
+    each node on the ground of its segment (``ground``: :func:`_ground_levels`)."""
+    from hollowtree.tree.verify import instance_features
+
+    col = {c: np.asarray(nodes.column(c).to_numpy()) for c in ("instance", "class_id", "score", "n_points", "depth",
+                                                                 "segment", *_BOX)}
+    inst = col["instance"].astype(np.int64)
+    cls = np.where((inst > 0) & (cmap[inst] > 0), cmap[inst], col["class_id"]).astype(np.int64)
+    seg = col["segment"].astype(np.int64)
+    known = (seg >= 1) & (seg <= len(ground))
+    g = np.full(len(seg), np.nan)
+    g[known] = ground[seg[known] - 1]
+    return instance_features(np.where(inst > 0, imap[inst], 0), cls, col["score"], col["n_points"],
+                             np.column_stack([col[c] for c in _BOX]), col["depth"], seg, g)
+
+
+def _check_elements(nodes: pa.Table, imap: np.ndarray, cmap: np.ndarray, ground: np.ndarray,
+                    model: str | None) -> None:
+    """The element check (tree/verify.py) of every element instance after the merge: an
+    instance it gives another class, ``other`` among them, takes it in ``cmap`` (in place)."""
+    from hollowtree.tree.verify import load_verify_model
+
+    ids, cls, feats = element_instances(nodes, imap, cmap, ground)
+    if not len(ids):
+        return
+    new = load_verify_model(model).decide(feats)
+    at = np.minimum(np.searchsorted(ids, imap), len(ids) - 1)
+    changed = (ids[at] == imap) & (new[at] != cls[at])
+    cmap[changed] = new[at[changed]]
 
 
 def _merge_map(nodes: pa.Table | None, n_instances: int) -> tuple[np.ndarray, np.ndarray]:

@@ -33,7 +33,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -147,18 +147,24 @@ class SplitModel:
     threshold`` goes left).
     """
 
+    #: The feature columns the model must have been fitted on, and how to refit it.
+    FEATURES: ClassVar[tuple[str, ...]] = FEATURE_NAMES
+    REFIT: ClassVar[str] = "refit it with `hollowtree fit-split`"
+
     init: float
     learning_rate: float
     trees: tuple[dict[str, np.ndarray], ...]
     threshold: float = 0.5
-    feature_names: tuple[str, ...] = FEATURE_NAMES
+    feature_names: tuple[str, ...] = ()
     version: int = 1
     info: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        if tuple(self.feature_names) != FEATURE_NAMES:
-            raise ValueError("this split model was made for other features "
-                             f"({len(self.feature_names)} columns); refit it with `hollowtree fit-split`")
+        if not self.feature_names:
+            object.__setattr__(self, "feature_names", self.FEATURES)
+        if tuple(self.feature_names) != self.FEATURES:
+            raise ValueError(f"this {type(self).__name__} was made for other features "
+                             f"({len(self.feature_names)} columns); {self.REFIT}")
         # All trees as one set of arrays (children as global node indices), walked together.
         sizes = [len(t["feature"]) for t in self.trees]
         offsets = np.r_[0, np.cumsum(sizes)].astype(np.int64)
@@ -204,10 +210,10 @@ class SplitModel:
         }
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> SplitModel:
+    def from_dict(cls, d: dict[str, Any]) -> Any:
         unknown = set(d) - {"version", "init", "learning_rate", "threshold", "feature_names", "info", "trees"}
         if unknown:
-            raise ValueError(f"unknown keys in a split model: {sorted(unknown)}")
+            raise ValueError(f"unknown keys in a {cls.__name__}: {sorted(unknown)}")
         trees = tuple(
             {"feature": np.asarray(t["feature"], dtype=np.int64), "threshold": np.asarray(t["threshold"], dtype=np.float64),
              "left": np.asarray(t["left"], dtype=np.int64), "right": np.asarray(t["right"], dtype=np.int64),
@@ -218,7 +224,7 @@ class SplitModel:
                    version=int(d.get("version", 1)), info=dict(d.get("info", {})))
 
     @classmethod
-    def from_sklearn(cls, model: Any, *, threshold: float = 0.5, info: dict[str, Any] | None = None) -> SplitModel:
+    def from_sklearn(cls, model: Any, *, threshold: float = 0.5, info: dict[str, Any] | None = None) -> Any:
         """From a fitted binary ``sklearn.ensemble.GradientBoostingClassifier``."""
         p0 = float(model.init_.class_prior_[1]) if hasattr(model.init_, "class_prior_") else float("nan")
         if not 0.0 < p0 < 1.0:
