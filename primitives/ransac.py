@@ -103,6 +103,7 @@ from hollowtree.primitives.shapes import (
     surface_coordinates,
     to_fit,
 )
+from hollowtree.tiling.grid import morton_codes3
 
 __all__ = ["RansacParams", "RansacResult", "efficient_ransac"]
 
@@ -129,14 +130,6 @@ REFIT_KEEP = 0.9  # a refit is kept unless it loses more than 10 % of the inlier
 
 
 # ------------------------------------------------------------------------ helpers
-def _spread_bits(x: npt.NDArray[np.uint64]) -> npt.NDArray[np.uint64]:
-    x = x & np.uint64(0x1FFFFF)
-    for shift, mask in ((32, 0x1F00000000FFFF), (16, 0x1F0000FF0000FF), (8, 0x100F00F00F00F00F),
-                        (4, 0x10C30C30C30C30C3), (2, 0x1249249249249249)):
-        x = (x | (x << np.uint64(shift))) & np.uint64(mask)
-    return x
-
-
 def _label_sparse(q: npt.NDArray[np.int64]) -> tuple[npt.NDArray[np.int64], int]:
     """8-connected labels of the occupied cells ``q`` without a dense bitmap."""
     width = int(q[:, 1].max()) + 3
@@ -219,7 +212,7 @@ class _Search:
         self.depth = int(np.clip(math.floor(math.log2(self.size / max(cluster_epsilon, 3 * epsilon))), 1, 20))
         self.n_levels = self.depth + 1
         q = np.minimum((P - lo) / self.size * (1 << self.depth), (1 << self.depth) - 1).astype(np.uint64)
-        codes = _spread_bits(q[:, 0]) | (_spread_bits(q[:, 1]) << np.uint64(1)) | (_spread_bits(q[:, 2]) << np.uint64(2))
+        codes = morton_codes3(q)
         self.order = np.argsort(codes, kind="stable")
         self.codes = codes[self.order]
         self.level_p = np.full(self.n_levels, 1.0 / self.n_levels)

@@ -43,7 +43,7 @@ import numpy.typing as npt
 
 from hollowtree.errors import ConfigError
 
-__all__ = ["TileGrid", "morton_order"]
+__all__ = ["TileGrid", "morton_codes3", "morton_order"]
 
 _GRID_KEYS = ("origin", "tile_size", "buffer", "shape")
 
@@ -381,6 +381,18 @@ def _spread3(v: npt.NDArray[np.uint64]) -> npt.NDArray[np.uint64]:
     return v
 
 
+def morton_codes3(q: npt.NDArray[np.uint64]) -> npt.NDArray[np.uint64]:
+    """Morton (Z-order) codes of integer cell coordinates ``q`` of shape (n, 3), 21 bits each
+    (x in the lowest bit of every three).
+
+    Examples
+    --------
+    >>> morton_codes3(np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]], dtype=np.uint64)).tolist()
+    [1, 2, 4, 7]
+    """
+    return _spread3(q[:, 0]) | (_spread3(q[:, 1]) << np.uint64(1)) | (_spread3(q[:, 2]) << np.uint64(2))
+
+
 def _spread2(v: npt.NDArray[np.uint64]) -> npt.NDArray[np.uint64]:
     """Put the low 32 bits of ``v`` at every second bit."""
     v = v & np.uint64(0xFFFFFFFF)
@@ -442,7 +454,7 @@ def morton_order(xyz_or_xy: npt.ArrayLike, *, origin: npt.ArrayLike, cell: float
     bits = 21 if pts.shape[1] == 3 else 32
     q = np.clip(np.floor((pts - o) / float(cell)), 0, 2**bits - 1).astype(np.uint64)
     if pts.shape[1] == 3:
-        code = _spread3(q[:, 0]) | (_spread3(q[:, 1]) << np.uint64(1)) | (_spread3(q[:, 2]) << np.uint64(2))
+        code = morton_codes3(q)
     else:
         code = _spread2(q[:, 0]) | (_spread2(q[:, 1]) << np.uint64(1))
     return _stable_argsort_codes(code, code_bits=(int(q.max(initial=0)).bit_length()) * pts.shape[1])
