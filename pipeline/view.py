@@ -119,6 +119,9 @@ class _Handler(BaseHTTPRequestHandler):
             return self._refuse(HTTPStatus.BAD_REQUEST, str(exc), head=head)
         except (BrokenPipeError, ConnectionResetError):
             return None
+        except Exception as exc:  # a damaged store, a lost connection to S3: one line, and serve on
+            print(f"hollowtree view: {path}: {type(exc).__name__}: {exc}", file=sys.stderr)
+            return self._refuse(HTTPStatus.INTERNAL_SERVER_ERROR, f"{type(exc).__name__}: {exc}", head=head)
         return self._refuse(HTTPStatus.NOT_FOUND, "not found", head=head)
 
 

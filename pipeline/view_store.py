@@ -179,12 +179,14 @@ class ViewStore:
                 self._tree = _Tree(self.store)
             return self._tree
 
-    def instance_counts(self) -> np.ndarray:
+    def instance_counts(self) -> np.ndarray | None:
         """Points per instance over every input point (``labels/instance``, read once, a
-        chunk at a time)."""
+        chunk at a time); None in a store without the array."""
         with self._lock:
             if self._instances is not None:
                 return self._instances
+        if not self.store.has("labels/instance"):
+            return None
         n = self.store.array_length("labels/instance")
         counts = np.zeros(1, np.int64)
         for a in range(0, n, CHUNK_POINTS):
@@ -208,10 +210,10 @@ class ViewStore:
     def element(self, instance: int, segment: int, leaf: int) -> dict[str, Any]:
         """A point's element: its instance's point count and box, and its tree path."""
         tree = self.tree()
-        counts = self.instance_counts() if instance > 0 else None
         out: dict[str, Any] = {"instance": instance, "segment": segment, "leaf": leaf}
-        if counts is not None:
-            out["n_points"] = int(counts[instance]) if instance < len(counts) else 0
+        if instance > 0:
+            counts = self.instance_counts()
+            out["n_points"] = None if counts is None else int(counts[instance]) if instance < len(counts) else 0
             box = tree.instance_box(instance)
             out["bbox"] = None if box is None else self._relative(np.asarray(box)).round(3).tolist()
         key = tree.tree_of(segment)

@@ -306,6 +306,22 @@ def test_clicking_a_dome_point_shows_its_element_and_tree_path(page, store):
     assert "root to leaf" in text
 
 
+def test_a_tree_node_in_the_outline_highlights_its_points(page):
+    pg, _ = page
+    pg.wait_for_selector("#tree li")
+    key = pg.get_attribute("#tree > li", "data-key")
+    tree, node = (int(k) for k in key.split("/"))
+    sub = pg.evaluate(f"fetch('/api/subtree?tree={tree}&node={node}').then(r => r.json())")
+    pg.click("#tree > li > .lab")
+    pg.wait_for_function("window.hollowtreeViewer.highlightedCount() > 0", timeout=10_000)
+    want = pg.evaluate("""s => window.hollowtreeViewer.batches.reduce((n, b) => {
+        for (let i = 0; i < b.n; i++) if (s.segments.includes(b.segment[i]) && s.nodes.includes(b.leaf[i])) n++;
+        return n; }, 0)""", sub)
+    assert pg.evaluate("window.hollowtreeViewer.highlightedCount()") == want
+    pg.keyboard.press("Escape")
+    assert pg.evaluate("window.hollowtreeViewer.highlightedCount()") == 0
+
+
 def test_a_store_on_s3_gives_the_same_view(server, store, monkeypatch):
     """The same store on S3 (a moto server): the same counts, nodes and tree paths."""
     pytest.importorskip("moto", reason="moto[server] is a dev dependency")

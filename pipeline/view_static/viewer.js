@@ -61,7 +61,7 @@
       if (on < 0.5) { gl_Position = vec4(2.0, 2.0, 2.0, 1.0); gl_PointSize = 0.0; return; }
       gl_Position = m * vec4(p, 1.0);
       // at least size pixels, and as large as the node's point spacing on screen (no holes)
-      float px = clamp(max(size, size / 4.0 * 1.2 * sp * proj / max(gl_Position.w, 1e-6)), 1.0, 5.0 * size);
+      float px = clamp(max(size, size / 4.0 * 1.2 * sp * proj / max(gl_Position.w, 1e-6)), 1.0, 3.0 * size);
       gl_PointSize = px * (hl > 0.5 && hlOn > 0.5 ? 1.6 : 1.0);
       c = (hlOn > 0.5 && hl < 0.5) ? col * 0.28 : (hl > 0.5 && hlOn > 0.5 ? mix(col, vec3(1.0, 0.9, 0.2), 0.35) : col);
     }`;
@@ -106,7 +106,13 @@
     }
     status();
   }
-  function loop() { if (dirty) draw(); requestAnimationFrame(loop); }
+  // while the first view loads, draw at most once a second: software WebGL would otherwise
+  // take the CPU that the server needs
+  let lastDraw = 0;
+  function loop(t) {
+    if (dirty && (V.ready || t - lastDraw > 1000)) { draw(); lastDraw = t; }
+    requestAnimationFrame(loop);
+  }
 
   // ------------------------------------------------------------------ colours
   function hash(v) { v = Math.imul(v ^ (v >>> 16), 0x45d9f3b); v = Math.imul(v ^ (v >>> 16), 0x45d9f3b); return (v ^ (v >>> 16)) >>> 0; }
@@ -154,7 +160,7 @@
     return [head, a];
   }
   function addBatch(head, a) {
-    const b = { tile: head.tile, chunk: head.chunk, level: head.level, n: head.n, pos: a.position, cls: a["class"],
+    const b = { tile: head.tile, chunk: head.chunk, level: head.level, first: head.first, n: head.n, pos: a.position, cls: a["class"],
       instance: a.instance, segment: a.segment, leaf: a.leaf, score: a.score, rgb: a.rgb, intensity: a.intensity };
     if (b.intensity) { let m = V.intensityMax || 1; for (let i = 0; i < b.n; i += 7) if (b.intensity[i] > m) m = b.intensity[i]; V.intensityMax = m; }
     b.gp = buffer(b.pos); b.gc = buffer(colours(b)); b.gk = buffer(b.cls); b.gh = buffer(new Uint8Array(b.n));
@@ -218,6 +224,33 @@
     const want = area / 6, l0 = nd.rows / 64;
     return Math.max(0, Math.min(meta.levels - 1, Math.ceil(Math.log2(Math.max(want / l0, 1)))));
   }
+  // free at least `need` points: the top levels of the nodes holding more than they now
+  // want (those out of view first); level 0 stays everywhere
+  function evict(need) {
+    const cands = [];
+    for (const nd of nodes.values()) {
+      if (nd.pending || nd.level <= 0) continue;
+      const w = Math.max(wanted(nd), 0);
+      if (nd.level > w) cands.push([wanted(nd) < 0 ? 1e9 : nd.level - w, nd, w]);
+    }
+    cands.sort((a, b) => b[0] - a[0]);
+    let freed = 0;
+    for (const [, nd, w] of cands) {
+      let changed = false;
+      while (nd.level > w && freed < need) {
+        let top = null;
+        for (const b of V.batches) if (b.node === nd && (!top || b.level > top.level)) top = b;
+        if (!top || top.first === 0) break;
+        V.batches.splice(V.batches.indexOf(top), 1);
+        for (const k of ["gp", "gc", "gk", "gh", "gs"]) gl.deleteBuffer(top[k]);
+        V.loaded -= top.n; nd.loaded -= top.n; nd.level = top.first - 1; freed += top.n; changed = true;
+      }
+      if (changed) spacing(nd);
+      if (freed >= need) break;
+    }
+    dirty = true;
+    return freed;
+  }
   let refining = false, refineAgain = false;
   async function refine() {
     if (!V.ready) return;
@@ -234,10 +267,14 @@
           if (w > nd.level) todo.push([(w - nd.level) * nd.rows, nd, Math.min(w, nd.level + 2)]);
         }
         todo.sort((a, b) => b[0] - a[0]);
-        const jobs = [];
+        const jobs = [], top = todo.slice(0, 12);
+        const adds = top.map(([, nd, level]) => Math.ceil(nd.rows * Math.pow(2, level - meta.levels + 1)) -
+          (nd.level < 0 ? 0 : Math.ceil(nd.rows * Math.pow(2, nd.level - meta.levels + 1))));
+        const sum = adds.reduce((a, b) => a + b, 0);
+        if (sum > POINT_BUDGET - V.loaded) evict(sum - (POINT_BUDGET - V.loaded));
         let budget = POINT_BUDGET - V.loaded;
-        for (const [, nd, level] of todo.slice(0, 12)) {
-          const add = Math.ceil(nd.rows * Math.pow(2, level - meta.levels + 1)) - (nd.level < 0 ? 0 : Math.ceil(nd.rows * Math.pow(2, nd.level - meta.levels + 1)));
+        for (const [k, [, nd, level]] of top.entries()) {
+          const add = adds[k];
           if (add > budget) continue;
           budget -= add; jobs.push(() => fetchNode(nd, level));
         }
@@ -253,6 +290,7 @@
   // ------------------------------------------------------------------ counts, legend, status
   V.drawnCount = () => { let n = 0; for (const b of V.batches) for (let i = 0; i < b.n; i++) if (mask[b.cls[i]] > 0.5) n++; return n; };
   V.loadedCount = () => V.loaded;
+  V.highlightedCount = () => { let n = 0; if (highlight.on) for (const b of V.batches) for (let i = 0; i < b.n; i++) if (highlight.test(b, i)) n++; return n; };
   V.busy = () => refining || [...nodes.values()].some((n) => n.pending);
   function status() {
     $("status").textContent = `${V.loaded.toLocaleString()} points loaded` + (V.ready ? "" : " (loading)");
@@ -303,7 +341,7 @@
         const dy = (m[1] * x + m[5] * y + m[9] * z + m[13]) / cw - py;
         if (dy > toly || dy < -toly) continue;
         const size = pointSize * dpr, sp = b.sp ? b.sp[i] : 0;
-        const half = Math.min(Math.max(size, size / 4 * 1.2 * sp * proj / cw), 5 * size) / 2 / dpr; // CSS pixels
+        const half = Math.min(Math.max(size, size / 4 * 1.2 * sp * proj / cw), 3 * size) / 2 / dpr; // CSS pixels
         const ex = Math.abs(dx) * toPx, ey = Math.abs(dy) * r.height / 2;
         if (ex <= half + 0.5 && ey <= half + 0.5) { if (cw < bestD) { bestD = cw; best = [b, i]; } }
         else { const d = Math.hypot(ex, ey); if (d < nearD) { nearD = d; near = [b, i]; } }
@@ -319,7 +357,7 @@
     const info = { "class": meta.classes[b.cls[i]].name, classId: b.cls[i], instance: b.instance[i], score: b.score[i],
       segment: b.segment[i], leaf: b.leaf[i], xyz: [b.pos[3 * i] + o[0], b.pos[3 * i + 1] + o[1], b.pos[3 * i + 2] + o[2]] };
     const r = await fetch(`/api/element?instance=${info.instance}&segment=${info.segment}&leaf=${info.leaf}`);
-    const el = await r.json();
+    const el = r.ok ? await r.json() : { path: [], error: await r.text() };
     Object.assign(info, { n_points: el.n_points, bbox: el.bbox, path: el.path, tree: el.tree });
     V.lastPick = info;
     const inst = info.instance;
@@ -327,7 +365,7 @@
     else setHighlight((bb, j) => bb.segment[j] === info.segment && bb.leaf[j] === info.leaf);
     const box = el.bbox ? el.bbox.map((v, k) => fmt(v + o[k % 3], 2)) : null;
     const rows = [["class", info["class"]], ["instance", inst || "none"], ["score", fmt(info.score)],
-      ["element points", el.n_points === undefined ? "–" : el.n_points.toLocaleString("en-US")],
+      ["element points", el.n_points == null ? "–" : el.n_points.toLocaleString("en-US")],
       ["box min", box ? box.slice(0, 3).join(", ") : "–"], ["box max", box ? box.slice(3).join(", ") : "–"],
       ["point", info.xyz.map((v) => fmt(v, 3)).join(", ")], ["segment", info.segment + " / leaf " + info.leaf]];
     let html = "<table>" + rows.map(([k, v]) => `<tr><td class="muted">${k}</td><td>${v}</td></tr>`).join("") + "</table>";
@@ -341,7 +379,8 @@
     $("element").classList.remove("muted");
     return info;
   }
-  $("element").addEventListener("click", (e) => { const li = e.target.closest("li[data-node]"); if (li) showNode(+li.dataset.tree, +li.dataset.node); });
+  const report = (err) => { V.errors.push(String(err)); console.warn(err); };
+  $("element").addEventListener("click", (e) => { const li = e.target.closest("li[data-node]"); if (li) showNode(+li.dataset.tree, +li.dataset.node).catch(report); });
 
   // ------------------------------------------------------------------ the tree outline
   async function showNode(tree, node) {
@@ -358,7 +397,7 @@
     const tw = n.n_children ? "▸" : "·";
     li.innerHTML = `<span class="tw">${tw}</span><span class="lab">${n.node === 0 && n.depth === 0 ? "tree " + n.tree : "node " + n.node} ` +
       `<span class="muted">${n.sequence} · ${n["class"]} · ${(n.n_points || 0).toLocaleString("en-US")}${n.xi !== null ? " · " + fmt(n.xi, 2) : ""}</span></span>`;
-    li.querySelector(".lab").addEventListener("click", () => showNode(n.tree, n.node));
+    li.querySelector(".lab").addEventListener("click", () => showNode(n.tree, n.node).catch(report));
     if (n.n_children) li.querySelector(".tw").addEventListener("click", async (e) => {
       const t = e.target;
       const sub = li.querySelector("ul");
@@ -379,7 +418,8 @@
   canvas.addEventListener("contextmenu", (e) => e.preventDefault());
   canvas.addEventListener("mousedown", (e) => { drag = { x: e.clientX, y: e.clientY, x0: e.clientX, y0: e.clientY, pan: e.button === 2 || e.shiftKey }; });
   window.addEventListener("mouseup", (e) => {
-    if (drag && Math.hypot(e.clientX - drag.x0, e.clientY - drag.y0) < 4 && e.button === 0) select(e.clientX, e.clientY);
+    if (drag && Math.hypot(e.clientX - drag.x0, e.clientY - drag.y0) < 4 && e.button === 0)
+      select(e.clientX, e.clientY).catch((err) => { V.errors.push(String(err)); $("element").textContent = "error: " + err; });
     drag = null;
   });
   window.addEventListener("mousemove", (e) => {
