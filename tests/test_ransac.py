@@ -78,6 +78,11 @@ def _noisy(rng, xyz, nrm, sigma=0.002):
     return xyz + rng.normal(0, sigma, xyz.shape), nrm / np.linalg.norm(nrm, axis=1)[:, None]
 
 
+def _noisy_parts(rng, parts):
+    """The (points, normals) of ``parts`` one after the other, with noise (:func:`_noisy`)."""
+    return _noisy(rng, np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
+
+
 def _with_outliers(rng, xyz, nrm, n_out):
     lo, hi = xyz.min(0), xyz.max(0)
     out = rng.uniform(lo, hi, (n_out, 3))
@@ -157,7 +162,7 @@ def test_two_coplanar_patches_are_two_primitives():
     rng = np.random.default_rng(3)
     a = _plane(rng, 3000, [0.0, 0.0, 0.0], [0, 0, 1], size=(3.0, 3.0))
     b = _plane(rng, 2000, [6.0, 0.0, 0.0], [0, 0, 1], size=(3.0, 2.0))  # 4.5 m gap
-    xyz, nrm = _noisy(rng, np.r_[a[0], b[0]], np.r_[a[1], b[1]])
+    xyz, nrm = _noisy_parts(rng, [a, b])
     res = efficient_ransac(xyz, nrm, **PARAMS, rng=0)
     assert [p.kind for p in res.primitives] == ["plane", "plane"]
     assert np.all(res.labels[:3000] == 0)  # the larger patch first
@@ -179,7 +184,7 @@ def test_box_gives_six_planes():
             keep = np.all(np.abs(xyz) <= size / 2 + 1e-9, axis=1)
             parts.append((xyz[keep], nrm[keep]))
             gt.append(np.full(keep.sum(), len(gt)))
-    xyz, nrm = _noisy(rng, np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
+    xyz, nrm = _noisy_parts(rng, parts)
     gt = np.concatenate(gt)
     res = efficient_ransac(xyz, nrm, **PARAMS, rng=0)
     assert [p.kind for p in res.primitives] == ["plane"] * 6
@@ -192,9 +197,8 @@ def test_box_gives_six_planes():
 
 def test_cylinder_standing_on_a_plane():
     rng = np.random.default_rng(5)
-    ground = _plane(rng, 6000, [0.0, 0.0, 0.0], [0, 0, 1], size=(6.0, 6.0))
-    column = _cylinder(rng, 4000, [0.5, -0.5, 0.0], [0, 0, 1], 0.4, 3.0)
-    xyz, nrm = _noisy(rng, np.r_[ground[0], column[0]], np.r_[ground[1], column[1]])
+    xyz, nrm = _noisy_parts(rng, [_plane(rng, 6000, [0.0, 0.0, 0.0], [0, 0, 1], size=(6.0, 6.0)),
+                                  _cylinder(rng, 4000, [0.5, -0.5, 0.0], [0, 0, 1], 0.4, 3.0)])
     res = efficient_ransac(xyz, nrm, **PARAMS, rng=2)
     assert sorted(p.kind for p in res.primitives) == ["cylinder", "plane"]
     kinds = [p.kind for p in res.primitives]
@@ -212,7 +216,7 @@ def test_mixed_scene_with_all_kinds():
         _cylinder(rng, 3000, [3.0, -3.0, 0.5], [0, 0, 1], 0.5, 3.0),
         _cone(rng, 3000, [0.0, 3.0, 4.0], [0, 0, -1], np.radians(35), 0.4, 3.0),
     ]
-    xyz, nrm = _noisy(rng, np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
+    xyz, nrm = _noisy_parts(rng, parts)
     gt = np.repeat(np.arange(4), [len(p[0]) for p in parts])
     res = efficient_ransac(xyz, nrm, **PARAMS, rng=3)
     kinds = [p.kind for p in res.primitives]
@@ -283,7 +287,7 @@ def test_zero_normals_give_the_labels_of_the_rows_left():
     pass a tile's points without copying the ones that have a normal)."""
     rng = np.random.default_rng(3)
     parts = [_plane(rng, 4000, [0, 0, 0], [0, 0, 1]), _plane(rng, 3000, [0, 2, 1], [0, 1, 0.2])]
-    xyz, nrm = _noisy(rng, np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
+    xyz, nrm = _noisy_parts(rng, parts)
     has = rng.random(len(xyz)) > 0.1
     nrm[~has] = 0.0
     whole = efficient_ransac(xyz, nrm, **PARAMS, rng=5)
@@ -514,9 +518,8 @@ def test_elbow_quarter_torus_is_one_patch():
 
 def test_torus_lying_on_a_plane():
     rng = np.random.default_rng(17)
-    ground = _plane(rng, 6000, [0.0, 0.0, 0.0], [0, 0, 1], size=(6.0, 6.0))
-    ring = _torus(rng, 4000, [0.5, -0.5, 0.3], [0, 0, 1], 1.0, 0.3)
-    xyz, nrm = _noisy(rng, np.r_[ground[0], ring[0]], np.r_[ground[1], ring[1]])
+    xyz, nrm = _noisy_parts(rng, [_plane(rng, 6000, [0.0, 0.0, 0.0], [0, 0, 1], size=(6.0, 6.0)),
+                                  _torus(rng, 4000, [0.5, -0.5, 0.3], [0, 0, 1], 1.0, 0.3)])
     res = efficient_ransac(xyz, nrm, **ALL, rng=2)
     kinds = [p.kind for p in res.primitives]
     assert sorted(kinds) == ["plane", "torus"]

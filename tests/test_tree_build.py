@@ -104,32 +104,15 @@ def _arches_matched(r, ginst, kids):
     return np.asarray(ious)
 
 
-def test_curved_arcade_gives_one_child_per_arch_by_s3():
-    pts, ginst, clf = _segment("curved_arcade", ClassId.ARCH)
+@pytest.mark.parametrize(("name", "n_bays", "sequence"), [("curved_arcade", 9, 3), ("arcade", 5, 2)])
+def test_an_arcade_gives_one_child_per_bay(name, n_bays, sequence):
+    """Curved: S3 (along the transport curve); straight: S2 (along the wall's plane)."""
+    pts, ginst, clf = _segment(name, ClassId.ARCH)
     n = len(np.unique(ginst))
-    assert n == 9
+    assert n == n_bays
     r = build_tree(pts, clf, rng=0)
     kids = _root_children(r)
-    assert set(r.nodes.sequence[kids].tolist()) == {3}
-    assert len(kids) == n
-    assert np.sum(_arches_matched(r, ginst, kids) >= 0.5) >= n - 1
-
-
-def test_curved_arcade_gives_one_child_per_arch():
-    pts, ginst, clf = _segment("curved_arcade", ClassId.ARCH)
-    n = len(np.unique(ginst))
-    r = build_tree(pts, clf, rng=0)
-    kids = _root_children(r)
-    assert len(kids) == n
-    assert np.sum(_arches_matched(r, ginst, kids) >= 0.5) >= n - 1
-
-
-def test_straight_arcade_gives_one_child_per_bay_by_s2():
-    pts, ginst, clf = _segment("arcade", ClassId.ARCH)
-    n = len(np.unique(ginst))
-    r = build_tree(pts, clf, rng=0)
-    kids = _root_children(r)
-    assert set(r.nodes.sequence[kids].tolist()) == {2}
+    assert set(r.nodes.sequence[kids].tolist()) == {sequence}
     assert len(kids) == n
     assert np.sum(_arches_matched(r, ginst, kids) >= 0.5) >= n - 1
 

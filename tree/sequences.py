@@ -245,6 +245,21 @@ def _as_xyz(xyz: npt.ArrayLike) -> FloatArray:
     return a
 
 
+def _with_curve(xyz: npt.ArrayLike, params: SequenceParams | None, rng: RngLike,
+                curve: TransportCurve | None) -> tuple[FloatArray, SequenceParams, TransportCurve | None]:
+    """A node's points, its settings (``params``, else the defaults) and its transport curve:
+    ``curve``, else ``psi(v1(x))``; None for a node of fewer than ``params.min_points``
+    points or one that no curve fits."""
+    a = _as_xyz(xyz)
+    params = params or SequenceParams()
+    if len(a) < params.min_points:
+        return a, params, None
+    if curve is None:
+        fit = psi(v1(a), residual_threshold=params.residual_threshold, rng=rng)
+        curve = fit if isinstance(fit, TransportCurve) else None
+    return a, params, curve
+
+
 def s1(xyz: npt.ArrayLike, *, params: SequenceParams | None = None, rng: RngLike = None,
        curve: TransportCurve | None = None) -> Proposal | None:
     """``S1 = rho(v2(p(psi(v1(x)))))``: cut at the peaks of the profile curve.
@@ -261,16 +276,9 @@ def s1(xyz: npt.ArrayLike, *, params: SequenceParams | None = None, rng: RngLike
     >>> prop.n_children, [round(float(c), 1) for c in prop.cuts]
     (2, [4.5])
     """
-    a = _as_xyz(xyz)
-    params = params or SequenceParams()
-    if len(a) < params.min_points:
-        return None
+    a, params, curve = _with_curve(xyz, params, rng, curve)
     if curve is None:
-        fit = psi(v1(a), residual_threshold=params.residual_threshold, rng=rng)
-        if not fit:
-            return None
-        assert isinstance(fit, TransportCurve)
-        curve = fit
+        return None
     prof = p(a, curve)
     hist = v2(prof[:, 1], prof[:, 0], statistic="max", sigma=params.sigma,
               bins_per_crossing=params.bins_per_crossing)
@@ -310,16 +318,9 @@ def s3(xyz: npt.ArrayLike, *, params: SequenceParams | None = None, rng: RngLike
     >>> prop.n_children, round(prop.curve.radius, 3)
     (2, 5.0)
     """
-    a = _as_xyz(xyz)
-    params = params or SequenceParams()
-    if len(a) < params.min_points:
-        return None
+    a, params, curve = _with_curve(xyz, params, rng, curve)
     if curve is None:
-        fit = psi(v1(a), residual_threshold=params.residual_threshold, rng=rng)
-        if not fit:
-            return None
-        assert isinstance(fit, TransportCurve)
-        curve = fit
+        return None
     sz = u(a, curve)
     return _finish(3, sz[:, 0], occupancy_cut(sz[:, 0], sz[:, 1], params), params, curve)
 
@@ -581,12 +582,7 @@ def propose(xyz: npt.ArrayLike, *, params: SequenceParams | None = None,
             rng: RngLike = None) -> dict[int, Proposal | None]:
     """Every proposal for one node, ``{1: S1, 2: S2, 3: S3, 4: storeys}`` (one ``psi`` fit
     shared by S1, S3 and the storeys; the storeys' ``Proposal.sequence`` is 2 or 3)."""
-    a = _as_xyz(xyz)
-    params = params or SequenceParams()
-    curve: TransportCurve | None = None
-    if len(a) >= params.min_points:
-        fit = psi(v1(a), residual_threshold=params.residual_threshold, rng=rng)
-        curve = fit if isinstance(fit, TransportCurve) else None
+    a, params, curve = _with_curve(xyz, params, rng, None)
     return {
         1: s1(a, params=params, curve=curve) if curve is not None else None,
         2: s2(a, params=params),
