@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from hollowtree.arrays import FloatArray
 from hollowtree.scenes.clutter import bench, bicycle, car, place, tree
 from hollowtree.scenes.mesh import TriMesh, concat_meshes
 from hollowtree.scenes.shapes import (
@@ -53,7 +54,6 @@ __all__ = [
     "wall",
 ]
 
-FloatArray = npt.NDArray[np.float64]
 
 
 # --------------------------------------------------------------------------- domes

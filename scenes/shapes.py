@@ -22,6 +22,7 @@ import mapbox_earcut
 import numpy as np
 import numpy.typing as npt
 
+from hollowtree.arrays import FloatArray, IntArray
 from hollowtree.scenes.mesh import TriMesh, concat_meshes
 
 __all__ = [
@@ -42,8 +43,6 @@ __all__ = [
     "wall_panel",
 ]
 
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
 _EPS = 1e-9
 
 

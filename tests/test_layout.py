@@ -12,7 +12,7 @@ REPO = Path(__file__).resolve().parents[1]
 PACKAGES = ["pipeline", "tiling", "tree", "hollownet", "primitives", "scenes"]
 #: The ground floor: ``hollowtree/`` modules that every package may import (``params``: the
 #: stages' parameter declarations and their one validator).
-GROUND = {"classes", "errors", "columns", "params"}
+GROUND = {"arrays", "classes", "errors", "columns", "params"}
 #: Floors, lowest first: a module imports only from its own floor and those below.
 FLOOR = {"ground": 0, "tiling": 1, "primitives": 1, "scenes": 2, "hollownet": 2, "tree": 3, "pipeline": 4,
          "api": 5}

@@ -24,6 +24,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
+from hollowtree.arrays import FloatArray, IntArray
 from hollowtree.classes import ELEMENT_CLASSES, ClassId
 from hollowtree.columns import column_max, column_min, column_span
 from hollowtree.tree.energy import Classifier, EnergyModel, energy_terms, load_energy_model
@@ -76,9 +77,6 @@ WHOLE_ROOT_CLASSES = (int(ClassId.DOME), int(ClassId.MINARET), int(ClassId.OTHER
 #: parts (:data:`WHOLE_ROOT_CLASSES`). Chosen on the validation split (docs/generalize.md).
 POSTS_FROM = (int(ClassId.DOME), int(ClassId.PILLAR))
 _PILLAR = int(ClassId.PILLAR)
-
-IntArray = npt.NDArray[np.int64]
-FloatArray = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)

@@ -9,13 +9,12 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from hollowtree.arrays import FloatArray
 from hollowtree.columns import column_span
 from hollowtree.primitives.shapes import FailedFit
 
 __all__ = ["DEFAULT_SIDES", "TransportCurve", "fit_circle", "fit_ngon"]
 
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
 RngLike = int | np.random.Generator | np.random.SeedSequence | None
 
 #: Polygons tried by :func:`psi` after the circle (square, hexagonal, octagonal plans).

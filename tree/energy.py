@@ -26,6 +26,7 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from hollowtree.arrays import FloatArray
 from hollowtree.classes import NUM_CLASSES
 
 __all__ = [
@@ -41,7 +42,6 @@ __all__ = [
     "load_energy_model",
 ]
 
-FloatArray = npt.NDArray[np.float64]
 
 #: The energy model shipped with the package (``tree/data/energy-v1.json``).
 DEFAULT_MODEL_PATH = Path(__file__).resolve().parent / "data" / "energy-v1.json"

@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from hollowtree.arrays import FloatArray, IntArray
 from hollowtree.classes import NUM_CLASSES, ClassId
 from hollowtree.scenes.scanner import ScanParams, scan
 from hollowtree.scenes.sites import build_scene
@@ -52,8 +53,6 @@ __all__ = [
     "right_paths",
 ]
 
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
 
 #: A proposal is good when its target (:func:`proposal_target`) reaches this.
 GOOD_TARGET = 0.5

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from hollowtree.arrays import FloatArray, IntArray
 from hollowtree.columns import column_span
 from hollowtree.tree.build import _is_flat
 from hollowtree.tree.energy import Classifier
@@ -38,8 +39,6 @@ from hollowtree.tree.split import FEATURE_NAMES, SplitModel, split_features
 
 __all__ = ["GOOD_TARGET", "THRESHOLDS", "SplitSamples", "fit_split_model", "proposal_samples", "proposal_target"]
 
-IntArray = npt.NDArray[np.int64]
-FloatArray = npt.NDArray[np.float64]
 
 #: A proposal is right when its target reaches this.
 GOOD_TARGET = 0.5

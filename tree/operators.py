@@ -28,6 +28,7 @@ import numpy.typing as npt
 from scipy.ndimage import gaussian_filter1d
 from scipy.signal import find_peaks
 
+from hollowtree.arrays import FloatArray, IntArray
 from hollowtree.primitives.shapes import FailedFit
 from hollowtree.tree.curves import (
     _FIT_SAMPLE,
@@ -57,8 +58,6 @@ __all__ = [
     "v2",
 ]
 
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
 
 
 # --------------------------------------------------------------------------- v1, h

@@ -8,12 +8,11 @@ import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
 
+from hollowtree.arrays import IntArray
 from hollowtree.tree.sequences import SequenceParams, _as_xyz
 
 __all__ = ["posts"]
 
-IntArray = npt.NDArray[np.int64]
-FloatArray = npt.NDArray[np.float64]
 
 #: Height (metres) of the horizontal slices :func:`posts` looks at one by one.
 POST_SLICE = 0.25
