@@ -37,7 +37,7 @@ Examples
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -374,6 +374,22 @@ def _best_overlap(keys: npt.NDArray[np.int64], member: npt.NDArray[np.bool_],
     return best, arg
 
 
+def _sizes(keys: npt.NDArray[np.int64]) -> dict[int, int]:
+    """Points per key."""
+    k, c = np.unique(keys, return_counts=True)
+    return dict(zip(k.tolist(), c.tolist(), strict=True))
+
+
+def _instances(cls: npt.NDArray[np.int64], inst: npt.NDArray[np.int64],
+               classes: tuple[int, ...]) -> Iterator[tuple[int, int, npt.NDArray[np.bool_], int]]:
+    """Every instance of ``classes`` (instance 0 is none): its class, its id, the mask of its
+    points and their count."""
+    for c in classes:
+        for e in np.unique(inst[(cls == c) & (inst > 0)]).tolist():
+            member = (cls == c) & (inst == e)
+            yield c, e, member, int(member.sum())
+
+
 def loss_buckets(
     gt_class: npt.ArrayLike, gt_instance: npt.ArrayLike, pred_class: npt.ArrayLike,
     pred_instance: npt.ArrayLike, coarse: npt.ArrayLike, leaf: npt.ArrayLike, *,
@@ -431,40 +447,33 @@ def loss_buckets(
     seg, lf = np.asarray(coarse, np.int64), np.asarray(leaf, np.int64)
     pkey = np.where(pinst > 0, pinst * 256 + pcls, 0)
 
-    def sizes(keys: npt.NDArray[np.int64]) -> dict[int, int]:
-        k, c = np.unique(keys, return_counts=True)
-        return dict(zip(k.tolist(), c.tolist(), strict=True))
-
-    s_pkey, s_leaf, s_seg = sizes(pkey), sizes(lf), sizes(seg)
+    s_pkey, s_leaf, s_seg = _sizes(pkey), _sizes(lf), _sizes(seg)
     out: list[dict[str, Any]] = []
-    for c in classes:
-        for e in np.unique(ginst[(gcls == c) & (ginst > 0)]).tolist():
-            member = (gcls == c) & (ginst == e)
-            m = int(member.sum())
-            iou_same, _ = _best_overlap(np.where(pcls == c, pkey, 0), member, s_pkey)
-            iou_any, key_any = _best_overlap(pkey, member, s_pkey)
-            iou_leaf, _ = _best_overlap(lf, member, s_leaf)
-            sk, sn = np.unique(seg[member], return_counts=True)
-            main, share = int(sk[np.argmax(sn)]), float(sn.max() / m)
-            lk, ln = np.unique(lf[member], return_counts=True)
-            inside = sum(x for k, x in zip(lk.tolist(), ln.tolist(), strict=True) if k and x > 0.5 * s_leaf[k])
-            if iou_same >= iou_threshold:
-                bucket = "found"
-            elif m < tiny:
-                bucket = "tiny"
-            elif max(iou_any, iou_leaf) >= iou_threshold:
-                bucket = "wrong class"
-            elif inside >= 0.5 * m:
-                bucket = "leaves, not grouped"
-            elif share < 0.5 or main == 0:
-                bucket = "coarse fragments"
-            else:
-                bucket = "not cut out"
-            got = key_any % 256 if key_any else int(np.bincount(pcls[member]).argmax())
-            out.append({"class": int(c), "instance": int(e), "points": m, "bucket": bucket,
-                        "iou_same": round(iou_same, 3), "iou_any": round(iou_any, 3), "iou_leaf": round(iou_leaf, 3),
-                        "predicted": int(got), "coarse_share": round(share, 3),
-                        "share_of_segment": round(float(sn.max()) / s_seg[main], 3) if main else 0.0})
+    for c, e, member, m in _instances(gcls, ginst, classes):
+        iou_same, _ = _best_overlap(np.where(pcls == c, pkey, 0), member, s_pkey)
+        iou_any, key_any = _best_overlap(pkey, member, s_pkey)
+        iou_leaf, _ = _best_overlap(lf, member, s_leaf)
+        sk, sn = np.unique(seg[member], return_counts=True)
+        main, share = int(sk[np.argmax(sn)]), float(sn.max() / m)
+        lk, ln = np.unique(lf[member], return_counts=True)
+        inside = sum(x for k, x in zip(lk.tolist(), ln.tolist(), strict=True) if k and x > 0.5 * s_leaf[k])
+        if iou_same >= iou_threshold:
+            bucket = "found"
+        elif m < tiny:
+            bucket = "tiny"
+        elif max(iou_any, iou_leaf) >= iou_threshold:
+            bucket = "wrong class"
+        elif inside >= 0.5 * m:
+            bucket = "leaves, not grouped"
+        elif share < 0.5 or main == 0:
+            bucket = "coarse fragments"
+        else:
+            bucket = "not cut out"
+        got = key_any % 256 if key_any else int(np.bincount(pcls[member]).argmax())
+        out.append({"class": int(c), "instance": int(e), "points": m, "bucket": bucket,
+                    "iou_same": round(iou_same, 3), "iou_any": round(iou_any, 3), "iou_leaf": round(iou_leaf, 3),
+                    "predicted": int(got), "coarse_share": round(share, 3),
+                    "share_of_segment": round(float(sn.max()) / s_seg[main], 3) if main else 0.0})
     return out
 
 
@@ -503,26 +512,22 @@ def false_positives(
     gcls, ginst = np.asarray(gt_class, np.int64), np.asarray(gt_instance, np.int64)
     pcls, pinst = np.asarray(pred_class, np.int64), np.asarray(pred_instance, np.int64)
     gkey = np.where(ginst > 0, ginst * 256 + gcls, 0)
-    gk, gn = np.unique(gkey, return_counts=True)
-    gsize = dict(zip(gk.tolist(), gn.tolist(), strict=True))
+    gsize = _sizes(gkey)
     out: list[dict[str, Any]] = []
-    for c in classes:
-        for p in np.unique(pinst[(pcls == c) & (pinst > 0)]).tolist():
-            member = (pcls == c) & (pinst == p)
-            m = int(member.sum())
-            iou_same, _ = _best_overlap(np.where(gcls == c, gkey, 0), member, gsize)
-            if iou_same >= iou_threshold:
-                continue
-            k, n = np.unique(gkey[member], return_counts=True)
-            top = int(np.argmax(n))
-            key, share = int(k[top]), float(n[top] / m)
-            truth = int(np.bincount(gcls[member]).argmax())
-            if key and share > 0.5:
-                kind = "piece" if key % 256 == c else "other element"
-            elif float(np.mean(gkey[member] == 0)) > 0.5:
-                kind = "no element"
-            else:
-                kind = "mixed"
-            out.append({"class": int(c), "points": m, "truth": truth, "share": round(share if key else 0.0, 3),
-                        "kind": kind, "instance": key // 256})
+    for c, _, member, m in _instances(pcls, pinst, classes):
+        iou_same, _ = _best_overlap(np.where(gcls == c, gkey, 0), member, gsize)
+        if iou_same >= iou_threshold:
+            continue
+        k, n = np.unique(gkey[member], return_counts=True)
+        top = int(np.argmax(n))
+        key, share = int(k[top]), float(n[top] / m)
+        truth = int(np.bincount(gcls[member]).argmax())
+        if key and share > 0.5:
+            kind = "piece" if key % 256 == c else "other element"
+        elif float(np.mean(gkey[member] == 0)) > 0.5:
+            kind = "no element"
+        else:
+            kind = "mixed"
+        out.append({"class": int(c), "points": m, "truth": truth, "share": round(share if key else 0.0, 3),
+                    "kind": kind, "instance": key // 256})
     return out
