@@ -16,8 +16,6 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
-import socket
-import subprocess
 import sys
 import tempfile
 import time
@@ -28,12 +26,6 @@ import numpy as np
 NAMES = ("class", "segment", "instance", "primitive", "leaf", "node", "group", "score")
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--units", type=int, default=24)
@@ -41,21 +33,11 @@ def main() -> None:
     args = ap.parse_args()
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from hollowtree.tiling.store import _COMPRESSOR, CHUNK_POINTS, RunStore
+    from tests.moto_s3 import moto_server
 
-    port = _free_port()
     log = Path(tempfile.mkdtemp()) / "moto.log"
-    with open(log, "w") as fh:
-        server = subprocess.Popen([sys.executable, "-m", "moto.server", "-H", "127.0.0.1", "-p", str(port)],
-                                  stdout=fh, stderr=subprocess.STDOUT)
-    os.environ.update(AWS_ACCESS_KEY_ID="test", AWS_SECRET_ACCESS_KEY="test", AWS_DEFAULT_REGION="us-east-1",
-                      AWS_ENDPOINT_URL=f"http://127.0.0.1:{port}")
-    try:
-        for _ in range(100):
-            try:
-                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
-                break
-            except OSError:
-                time.sleep(0.1)
+    with moto_server(log) as aws:
+        os.environ.update(aws)
         import s3fs
 
         s3fs.S3FileSystem().mkdir("bench")
@@ -86,9 +68,6 @@ def main() -> None:
                 assert all(np.array_equal(back[k], units[-1][k]) for k in NAMES), way
                 rows.append((where, way, n, seconds))
         shutil.rmtree(local)
-    finally:
-        server.kill()
-        server.wait()
     print(f"{args.units} units of {len(NAMES)} arrays x {args.rows:,} rows")
     print(f"{'store':13s} {'way':22s} {'requests':>9s} {'per array':>10s} {'s':>7s}")
     for where, way, n, seconds in rows:

@@ -7,7 +7,6 @@ from __future__ import annotations
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -16,6 +15,7 @@ from pathlib import Path
 import laspy
 import numpy as np
 import pytest
+from moto_s3 import free_port, moto_server
 
 from hollowtree.classes import ClassId
 from hollowtree.pipeline.coarse import COARSE_ALGORITHM
@@ -201,16 +201,10 @@ def test_sigkill_mid_run_then_resume(reference, scan, tmp_path):
     _same(_labels(str(store)), reference["labels"])
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture
 def dask_cluster(tmp_path):
     """`dask scheduler` and two `dask worker` processes on 127.0.0.1."""
-    port = _free_port()
+    port = free_port()
     env = dict(os.environ, PYTHONPATH=str(REPO))
     procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
                                "--port", str(port), "--no-dashboard"], env=env, cwd=tmp_path,
@@ -258,18 +252,8 @@ def test_store_on_s3_moto_server_and_a_changed_parameter(reference, scan, tmp_pa
     are the plain local run's."""
     pytest.importorskip("moto", reason="moto[server] is a dev dependency")
     pytest.importorskip("s3fs", reason="s3fs is a dev dependency")
-    port = _free_port()
-    server = subprocess.Popen([sys.executable, "-m", "moto.server", "-H", "127.0.0.1", "-p", str(port)],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    env = dict(os.environ, AWS_ACCESS_KEY_ID="test", AWS_SECRET_ACCESS_KEY="test",
-               AWS_DEFAULT_REGION="us-east-1", AWS_ENDPOINT_URL=f"http://127.0.0.1:{port}")
-    try:
-        for _ in range(100):
-            try:
-                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
-                break
-            except OSError:
-                time.sleep(0.1)
+    with moto_server() as aws:
+        env = dict(os.environ, **aws)
         import s3fs
 
         fs = s3fs.S3FileSystem(key="test", secret="test", endpoint_url=env["AWS_ENDPOINT_URL"])
@@ -286,15 +270,12 @@ def test_store_on_s3_moto_server_and_a_changed_parameter(reference, scan, tmp_pa
                 monkeypatch.setenv(k, v)
         arrays = _labels("s3://hollowtree-test/run.zarr")
         _same(arrays, reference["labels"])
-    finally:
-        server.kill()
-        server.wait()
 
 
 def test_an_unreachable_object_store_is_one_line(scan, tmp_path):
     pytest.importorskip("s3fs", reason="s3fs is a dev dependency")
     env = dict(os.environ, AWS_ACCESS_KEY_ID="test", AWS_SECRET_ACCESS_KEY="test", AWS_DEFAULT_REGION="us-east-1",
-               AWS_ENDPOINT_URL=f"http://127.0.0.1:{_free_port()}", AWS_MAX_ATTEMPTS="1")
+               AWS_ENDPOINT_URL=f"http://127.0.0.1:{free_port()}", AWS_MAX_ATTEMPTS="1")
     wf = _workflow(tmp_path, scan, "s3://nowhere/run.zarr")
     r = _cli("run", str(wf), "--no-progress", env=env)
     assert r.returncode == 2
@@ -449,7 +430,7 @@ def test_an_unreachable_scheduler_is_one_line_and_leaves_no_folder(scan, tmp_pat
     """The run would make the store's missing folders (out/...), but leaves none of them
     behind when it stops before writing anything."""
     store = tmp_path / "out" / "runs" / "never.zarr"
-    wf = _workflow(tmp_path, scan, str(store), extra=f"cluster: {{scheduler: 'tcp://127.0.0.1:{_free_port()}'}}\n")
+    wf = _workflow(tmp_path, scan, str(store), extra=f"cluster: {{scheduler: 'tcp://127.0.0.1:{free_port()}'}}\n")
     r = _cli("run", str(wf), "--no-progress")
     assert r.returncode == 2
     assert len(r.stderr.strip().splitlines()) == 1

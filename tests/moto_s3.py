@@ -1,0 +1,48 @@
+"""A local S3 server (moto) for the tests and benchmarks that put a run store on an object store.
+
+Needs the dev dependencies ``moto[server]`` and ``s3fs``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that nothing listens on now."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@contextlib.contextmanager
+def moto_server(log: Path | None = None) -> Iterator[dict[str, str]]:
+    """Run a moto S3 server on a free port for the ``with`` block (killed after it).
+
+    Yields the ``AWS_*`` environment variables that point boto and s3fs at it (test
+    credentials). ``log``: a file for the server's output (one line per request answered);
+    None discards it.
+    """
+    port = free_port()
+    with open(log or os.devnull, "w") as out:
+        server = subprocess.Popen([sys.executable, "-m", "moto.server", "-H", "127.0.0.1", "-p", str(port)],
+                                  stdout=out, stderr=subprocess.STDOUT)
+    try:
+        for _ in range(100):
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+                break
+            except OSError:
+                time.sleep(0.1)
+        yield {"AWS_ACCESS_KEY_ID": "test", "AWS_SECRET_ACCESS_KEY": "test", "AWS_DEFAULT_REGION": "us-east-1",
+               "AWS_ENDPOINT_URL": f"http://127.0.0.1:{port}"}
+    finally:
+        server.kill()
+        server.wait()
