@@ -28,6 +28,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
+from hollowtree.arrays import FloatArray, IntArray
 from hollowtree.columns import column_min
 from hollowtree.errors import ConfigError
 from hollowtree.params import check_args
@@ -49,7 +50,7 @@ _QUERY_BUDGET = 1 << 20
 # -- public kernels ------------------------------------------------------------------------
 
 
-def dbscan_labels(xyz: npt.ArrayLike, *, eps: float, min_samples: int) -> npt.NDArray[np.int64]:
+def dbscan_labels(xyz: npt.ArrayLike, *, eps: float, min_samples: int) -> IntArray:
     """Cluster points with DBSCAN (Euclidean), equal to scikit-learn's labels.
 
     Parameters
@@ -197,7 +198,7 @@ def default_eps(xyz: npt.ArrayLike, *, k: int = 8, factor: float = 3.0) -> float
 
 def dbscan_segments(
     xyz: npt.ArrayLike, primitive_labels: npt.ArrayLike, *, eps: float, min_samples: int
-) -> npt.NDArray[np.int64]:
+) -> IntArray:
     """Split each primitive's inliers into spatially connected segments.
 
     Parameters
@@ -258,8 +259,8 @@ def dbscan_segments(
 
 
 def _cells(
-    pts: npt.NDArray[np.float64], side: float
-) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64] | None, tuple[int, int]]:
+    pts: FloatArray, side: float
+) -> tuple[IntArray, IntArray, IntArray | None, tuple[int, int]]:
     """Grid cell of each point.
 
     Returns the cell key per point, the integer cell coordinates per point (with 2 cells
@@ -305,12 +306,12 @@ _OFFSETS = _offsets()
 
 
 def _neighbour_cells(
-    cells: npt.NDArray[np.int64],
-    cell_ijk: npt.NDArray[np.int64],
-    uxy: npt.NDArray[np.int64] | None,
+    cells: IntArray,
+    cell_ijk: IntArray,
+    uxy: IntArray | None,
     dims: tuple[int, int],
     off: tuple[int, int, int],
-) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+) -> tuple[IntArray, IntArray]:
     """Pairs (a, b) of positions in the sorted ``cells`` with b = a + off."""
     dy_dim, dz_dim = dims
     if uxy is None:
@@ -330,9 +331,9 @@ def _neighbour_cells(
 
 
 def _core_points(
-    pts: npt.NDArray[np.float64],
+    pts: FloatArray,
     tree: cKDTree,
-    cell: npt.NDArray[np.int64],
+    cell: IntArray,
     eps: float,
     min_samples: int,
 ) -> npt.NDArray[np.bool_]:
@@ -352,22 +353,15 @@ def _core_points(
     return core
 
 
-def _tree_order(tree: cKDTree, idx: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
+def _tree_order(tree: cKDTree, idx: IntArray) -> IntArray:
     """``idx`` sorted in the tree's leaf order: queries 3-4x faster than input order."""
     rank = np.empty(tree.n, dtype=np.int64)
     rank[tree.indices] = np.arange(tree.n)
     return idx[np.argsort(rank[idx], kind="stable")]
 
 
-def _join_cells(
-    uf: UnionFind,
-    a: npt.NDArray[np.int64],
-    b: npt.NDArray[np.int64],
-    start: npt.NDArray[np.int64],
-    count: npt.NDArray[np.int64],
-    cxyz: npt.NDArray[np.float64],
-    eps: float,
-) -> None:
+def _join_cells(uf: UnionFind, a: IntArray, b: IntArray, start: IntArray, count: IntArray, cxyz: FloatArray,
+                eps: float) -> None:
     """Union the cell pairs (a, b) that hold core points within eps of each other."""
     if not a.size:
         return
@@ -410,14 +404,8 @@ def _join_cells(
                 uf.union_pairs([ca], [cb])
 
 
-def _any_within(
-    start_a: npt.NDArray[np.int64],
-    count_a: npt.NDArray[np.int64],
-    start_b: npt.NDArray[np.int64],
-    count_b: npt.NDArray[np.int64],
-    cxyz: npt.NDArray[np.float64],
-    eps: float,
-) -> npt.NDArray[np.bool_]:
+def _any_within(start_a: IntArray, count_a: IntArray, start_b: IntArray, count_b: IntArray, cxyz: FloatArray,
+                eps: float) -> npt.NDArray[np.bool_]:
     """For each pair of point runs, whether any point of run a is within eps of run b."""
     work = count_a * count_b
     total = int(work.sum())
@@ -435,10 +423,10 @@ def _any_within(
 
 
 def _label_border(
-    pts: npt.NDArray[np.float64],
+    pts: FloatArray,
     tree: cKDTree,
     core: npt.NDArray[np.bool_],
-    labels: npt.NDArray[np.int64],
+    labels: IntArray,
     eps: float,
     min_samples: int,
 ) -> None:
@@ -533,7 +521,7 @@ def window_spacing(windows: Iterable[tuple[npt.ArrayLike, npt.ArrayLike]], *, k:
 
 
 def sparse_points(xyz: npt.ArrayLike, mask: npt.ArrayLike, spacing: float, factor: float, *, k: int = 8
-                  ) -> tuple[npt.NDArray[np.int64], float]:
+                  ) -> tuple[IntArray, float]:
     """Rows of ``mask`` whose local spacing is at least ``factor`` x ``spacing``.
 
     The local spacing of a point is the distance to its ``k``-th nearest neighbour among
