@@ -18,7 +18,10 @@ the labels stage's records with class counts) without running the pipeline, in
 ``--scratch`` (kept for the next run). A synthetic store has no tree tables and no
 input-order label arrays: the viewer reads neither for the first view.
 
-Run: ``python benchmarks/bench_view.py [--synthetic 1e6,1e7,1e8] [--out benchmarks/results/view.json]``.
+With playwright and Debian's chromium, the page itself is timed too: from starting the
+server to the first view drawn in headless Chromium (software WebGL), a fresh server.
+
+Run: ``python benchmarks/bench_view.py [--synthetic 1e6,1e7,1e8] [--no-browser] [--out benchmarks/results/view.json]``.
 """
 
 from __future__ import annotations
@@ -187,12 +190,46 @@ def measure(store: Path) -> dict:
         proc.wait(timeout=30)
 
 
+def measure_browser(store: Path) -> dict | None:
+    """The same in headless Chromium (Debian's, with software WebGL): seconds from starting
+    ``hollowtree view`` to the page's first view drawn; None without playwright or chromium."""
+    import shutil
+
+    exe = shutil.which("chromium") or shutil.which("chromium-browser")
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        return None
+    if exe is None:
+        return None
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=exe, args=[
+            "--use-gl=angle", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox"])
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        t0 = time.perf_counter()
+        proc = subprocess.Popen([sys.executable, "-m", "hollowtree.pipeline.view", str(store), "--port", "0"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO)
+        try:
+            base = re.search(r"http://[\d.]+:\d+/", proc.stdout.readline()).group(0)
+            page.goto(base)
+            page.wait_for_function("window.hollowtreeViewer && window.hollowtreeViewer.ready", timeout=120_000)
+            t = time.perf_counter() - t0
+            return {"browser_first_view_s": round(t, 2),
+                    "browser_points_drawn": page.evaluate("window.hollowtreeViewer.loadedCount()"),
+                    "browser_peak_rss_bytes": _peak_rss(proc.pid)}
+        finally:
+            browser.close()
+            proc.terminate()
+            proc.wait(timeout=30)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--store", default=str(REPO / "out" / "local.zarr"), help="a real store (default: the demo's)")
     ap.add_argument("--synthetic", default="1e6,1e7,1e8", help="point counts of synthetic stores ('' for none)")
     ap.add_argument("--scratch", default="/tmp/hollowtree-bench-view", help="where the synthetic stores are kept")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "view.json"))
+    ap.add_argument("--no-browser", action="store_true", help="skip the headless Chromium measurement")
     args = ap.parse_args()
     sys.path.insert(0, str(REPO))
     results = []
@@ -201,6 +238,7 @@ def main() -> None:
         subprocess.run([sys.executable, "-m", "hollowtree", "run", "workflows/local.yaml"], cwd=REPO, check=True)
     if (store / "zarr.json").is_file():
         r = measure(store)
+        r.update((None if args.no_browser else measure_browser(store)) or {})
         r["kind"] = "demo (workflows/local.yaml)"
         results.append(r)
         print(json.dumps(r))
@@ -208,6 +246,7 @@ def main() -> None:
         n = int(float(text))
         path = synthetic_store(Path(args.scratch) / f"synthetic-{n}.zarr", n)
         r = measure(path)
+        r.update((None if args.no_browser else measure_browser(path)) or {})
         r["kind"] = "synthetic"
         results.append(r)
         print(json.dumps(r))
@@ -216,12 +255,12 @@ def main() -> None:
     Path(args.out).write_text(json.dumps(out, indent=1) + "\n")
     print(f"{args.out}")
     print(f"{'store':<34} {'points':>12} {'tiles':>6} {'first view s':>13} {'payload MB':>11} {'chunk reads':>12} "
-          f"{'peak RSS MB':>12} {'all L0 chunk reads':>19} {'peak RSS MB':>12}")
+          f"{'peak RSS MB':>12} {'all L0 chunk reads':>19} {'peak RSS MB':>12} {'browser s':>10}")
     for r in results:
         print(f"{Path(r['store']).name:<34} {r['n_input']:>12,} {r['tiles']:>6} {r['first_view_s']:>13.2f} "
               f"{r['first_view_payload_bytes'] / 1e6:>11.1f} {r['first_view_chunk_reads']:>12} "
               f"{r['peak_rss_after_first_view_bytes'] / 2**20:>12.0f} {r['level0_everywhere_chunk_reads']:>19} "
-              f"{r['peak_rss_after_level0_everywhere_bytes'] / 2**20:>12.0f}")
+              f"{r['peak_rss_after_level0_everywhere_bytes'] / 2**20:>12.0f} {r.get('browser_first_view_s', float('nan')):>10.2f}")
 
 
 if __name__ == "__main__":

@@ -55,6 +55,7 @@ class _Handler(BaseHTTPRequestHandler):
     view: Any  # view_store.ViewStore
     pages: dict[str, bytes]
     quiet = True
+    loopback = True
 
     def log_message(self, format: str, *args: Any) -> None:  # noqa: A002 (the base class's name)
         if not self.quiet:
@@ -90,6 +91,9 @@ class _Handler(BaseHTTPRequestHandler):
     def _route(self, *, head: bool) -> None:
         parts = urlsplit(self.path)
         path = parts.path
+        if self.loopback and (self.headers.get("Host") or "").rsplit(":", 1)[0].strip("[]") not in _LOCAL_NAMES:
+            # a page of another site that resolves its name to 127.0.0.1 (DNS rebinding)
+            return self._refuse(HTTPStatus.FORBIDDEN, "this server answers localhost only", head=head)
         # only the page's own files and the data routes: no path is ever joined to a folder
         if path in STATIC and not parts.query:
             name, ctype = STATIC[path]
@@ -125,6 +129,9 @@ class _Handler(BaseHTTPRequestHandler):
         return self._refuse(HTTPStatus.NOT_FOUND, "not found", head=head)
 
 
+_LOCAL_NAMES = {"127.0.0.1", "localhost", "::1"}
+
+
 def _int(q: dict[str, str], name: str, default: int | None = None) -> int:
     if name not in q:
         if default is None:
@@ -143,7 +150,8 @@ def make_server(store: str, *, host: str = "127.0.0.1", port: int = 0, quiet: bo
 
     view = ViewStore(store)
     pages = {name: _static(name) for name, _ in STATIC.values()}
-    handler = type("ViewHandler", (_Handler,), {"view": view, "pages": pages, "quiet": quiet})
+    loopback = host in _LOCAL_NAMES or host.startswith("127.")
+    handler = type("ViewHandler", (_Handler,), {"view": view, "pages": pages, "quiet": quiet, "loopback": loopback})
     try:
         server = ThreadingHTTPServer((host, port), handler)
     except OSError as exc:

@@ -15,6 +15,7 @@ chunks it reads does not grow with the point count; the rest streams in afterwar
 
 from __future__ import annotations
 
+import functools
 import json
 import struct
 from collections.abc import Mapping, Sequence
@@ -56,9 +57,18 @@ def level_rows(n: int, level: int, seed: int, first: int | None = None) -> np.nd
     first = level if first is None else first
     if not 0 <= first <= level < LEVELS:
         raise ValueError(f"levels must be 0 <= first <= level < {LEVELS}, not {first}..{level}")
-    perm = np.random.default_rng(seed).permutation(n)
+    perm = _permutation(n, seed)
     lo = _cut(n, first - 1) if first else 0
     return np.sort(perm[lo:_cut(n, level)])
+
+
+@functools.lru_cache(maxsize=8)
+def _permutation(n: int, seed: int) -> np.ndarray:
+    """A seeded permutation of ``range(n)``, made once (nodes are mostly ``CHUNK_POINTS``
+    rows, so one permutation serves every full node of a store that uses one seed)."""
+    perm = np.random.default_rng(seed).permutation(n)
+    perm.setflags(write=False)
+    return perm
 
 
 def first_view(nodes: Sequence[Mapping[str, int]], *, max_tiles: int = FIRST_TILES,

@@ -145,7 +145,9 @@ class ViewStore:
         if chunk < 0 or start >= n or not 0 <= first <= level < LEVELS:
             raise ConfigError(f"no node ({tile}, {chunk}) at levels {first}..{level}")
         stop = min(start + CHUNK_POINTS, n)
-        rows = level_rows(stop - start, level, seed=tile * 1_000_003 + chunk, first=first)
+        # one seed for every node: its rows are its own points (a compact piece of space), so
+        # the same row order draws an unrelated sample in each, and is made once
+        rows = level_rows(stop - start, level, seed=0, first=first)
         core = self._read(f"tiles/{tile}/core", start, stop)
         rows = rows[core[rows]]
         index = self._read(f"tiles/{tile}/index", start, stop)[rows]

@@ -59,9 +59,11 @@ def server(store):
     srv.server_close()
 
 
-def _get(srv, path: str, method: str = "GET") -> tuple[int, bytes]:
+def _get(srv, path: str, method: str = "GET", host: str | None = None) -> tuple[int, bytes]:
     conn = http.client.HTTPConnection(*srv.server_address[:2], timeout=30)
-    conn.putrequest(method, path, skip_accept_encoding=True)  # the path exactly as given
+    conn.putrequest(method, path, skip_host=host is not None, skip_accept_encoding=True)  # the path as given
+    if host is not None:
+        conn.putheader("Host", host)
     conn.endheaders()
     r = conn.getresponse()
     body = r.read()
@@ -184,6 +186,8 @@ def test_bad_requests_and_writes_are_refused(server):
     assert _get(server, "/api/node?tile=123456&chunk=0&level=0")[0] == 400
     assert _get(server, "/api/meta", method="POST")[0] == 405
     assert _get(server, "/api/meta", method="DELETE")[0] == 405
+    assert _get(server, "/api/meta", host="evil.example:8765")[0] == 403  # DNS rebinding
+    assert _get(server, "/api/meta", host="localhost:8765")[0] == 200
     status, body = _get(server, "/")
     assert status == 200
     assert b"viewer.js" in body

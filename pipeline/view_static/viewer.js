@@ -106,11 +106,11 @@
     }
     status();
   }
-  // while the first view loads, draw at most once a second: software WebGL would otherwise
-  // take the CPU that the server needs
+  // nothing is drawn before the first view is in (a count says how far it is): software WebGL
+  // would take the CPU that the server needs; on a slow store (S3) a draw every 2 s shows progress
   let lastDraw = 0;
   function loop(t) {
-    if (dirty && (V.ready || t - lastDraw > 1000)) { draw(); lastDraw = t; }
+    if (dirty && (V.ready || t - lastDraw > 2000)) { draw(); lastDraw = t; } else if (!V.ready) status();
     requestAnimationFrame(loop);
   }
 
@@ -465,7 +465,7 @@
     for (const n of meta.nodes) nodes.set(n.tile + "/" + n.chunk, { ...n, level: -1, pending: false, box: null });
     legend();
     fit(meta.bounds);
-    requestAnimationFrame(loop);
+    requestAnimationFrame((t) => { lastDraw = t; loop(t); });
     const first = meta.first_view.map((f) => () => fetchNode(nodes.get(f.tile + "/" + f.chunk), f.level));
     await pool(first);
     V.dataBox = dataBox(); fit(V.dataBox);
