@@ -30,6 +30,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
+from hollowtree.arrays import FloatArray, IntArray
 from hollowtree.primitives.dbscan import dbscan_labels
 from hollowtree.tree.operators import (
     Histogram,
@@ -51,8 +52,6 @@ from hollowtree.tree.operators import (
 __all__ = ["GAP_SEQUENCE", "PART_SEQUENCE", "POST_SEQUENCE", "SEQUENCES", "Proposal", "SequenceParams", "gaps", "occupancy_cut", "parts", "propose", "s1",
            "s2", "s3", "storeys"]
 
-IntArray = npt.NDArray[np.int64]
-FloatArray = npt.NDArray[np.float64]
 
 #: Sequence ids as stored in the node table (0 = the root, produced by no sequence).
 SEQUENCES: tuple[int, ...] = (1, 2, 3)
