@@ -310,6 +310,17 @@ def test_clicking_a_dome_point_shows_its_element_and_tree_path(page, store):
     assert "root to leaf" in text
 
 
+def test_every_colour_mode_draws(page):
+    pg, messages = page
+    shots = {}
+    for mode in ("instance", "segment", "score", "rgb", "intensity", "class"):
+        pg.select_option("#mode", mode)
+        pg.evaluate("window.hollowtreeViewer.redraw()")
+        shots[mode] = pg.locator("canvas").screenshot()
+    assert len(set(shots.values())) == len(shots)  # each mode colours differently
+    assert messages == []
+
+
 def test_a_tree_node_in_the_outline_highlights_its_points(page):
     pg, _ = page
     pg.wait_for_selector("#tree li")
