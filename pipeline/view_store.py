@@ -74,7 +74,11 @@ class ViewStore:
         tile_recs = self.store.records("labels_tiles")
         self.tiles = [int(t) for t in attrs["ingest"]["tiles"]]
         self.n_parts = {t: len(tile_recs.get(str(t), {}).get("parts", [])) for t in self.tiles}
-        self.rows = {t: self.store.array_length(f"tiles/{t}/index") for t in self.tiles}
+        # each tile's rows from its ingest record (one listing; on S3 one request a tile less),
+        # else from its array's metadata
+        ing, ih = self.store.records("ingest"), attrs["ingest"].get("params_hash")
+        self.rows = {t: int(r["n_points"]) if (r := ing.get(str(t), {})).get("params_hash") == ih
+                     and "n_points" in r else self.store.array_length(f"tiles/{t}/index") for t in self.tiles}
         self.nodes = [{"tile": t, "chunk": c, "rows": min(CHUNK_POINTS, self.rows[t] - c * CHUNK_POINTS)}
                       for t in self.tiles for c in range(-(-self.rows[t] // CHUNK_POINTS))]
         mins = np.min([s["mins"] for s in attrs["sources"] if "mins" in s] or [[0, 0, 0]], axis=0)

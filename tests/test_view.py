@@ -119,6 +119,7 @@ def test_nodes_carry_the_store_labels(server, store):
     v = server.view
     rs = RunStore.open(store)
     lab = {k: rs.read_slice(f"labels/{k}") for k in ("class", "instance", "segment")}
+    assert v.rows == {t: rs.array_length(f"tiles/{t}/index") for t in v.tiles}  # from the ingest records
     got, want = np.zeros(len(CLASS_NAMES), np.int64), np.zeros(len(CLASS_NAMES), np.int64)
     for t in v.tiles:
         d = rs.read_unit(f"tiles/{t}", ["index", "core", "xyz"])
