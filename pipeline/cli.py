@@ -78,20 +78,11 @@ def _synth_description() -> str:
     )
 
 
-
-
-
-
-
-
-
-
-
-
-
-
-
-
+def _command(sub: Any, name: str, func: Any, *, help: str, description: str | None = None) -> _Parser:
+    """Add the subcommand ``name``, run by ``func(args)``, to the subparsers ``sub``."""
+    parser: _Parser = sub.add_parser(name, help=help, description=description)
+    parser.set_defaults(func=func)
+    return parser
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -104,10 +95,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="store_true", help="log hollowtree's debug messages")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
-    s = sub.add_parser(
-        "synth",
-        help="make a labelled synthetic scan of a site (LAS/LAZ with gt_class, gt_instance)",
-    )
+    s = _command(sub, "synth", _cmd_synth,
+                 help="make a labelled synthetic scan of a site (LAS/LAZ with gt_class, gt_instance)")
     s.late_description = _synth_description
     s.add_argument("site", help="site or test scene name")
     s.add_argument("--out", required=True, type=Path, help="output .laz or .las file")
@@ -129,17 +118,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--crs", help="coordinate reference system to record, e.g. EPSG:32643")
     s.add_argument("--overwrite", action="store_true", help="replace an existing output")
     s.add_argument("--no-progress", action="store_true", help="no progress bar")
-    s.set_defaults(func=_cmd_synth)
 
-    g = sub.add_parser(
-        "ingest",
-        help="stream point files into a tiled, chunked Zarr run store",
-        description=(
-            "Tile LAS/LAZ/PLY/E57 files of one registered site into a Zarr v3 run store: "
-            "points routed to tiles with a buffer, Morton-sorted, original indices kept. "
-            "Rerunning the same command resumes an interrupted ingest."
-        ),
-    )
+    g = _command(sub, "ingest", _cmd_ingest, help="stream point files into a tiled, chunked Zarr run store",
+                 description="Tile LAS/LAZ/PLY/E57 files of one registered site into a Zarr v3 run store: "
+                             "points routed to tiles with a buffer, Morton-sorted, original indices kept. "
+                             "Rerunning the same command resumes an interrupted ingest.")
     g.add_argument("inputs", nargs="+", type=Path, help="input files (one registered site)")
     g.add_argument("--store", required=True, help="run store: a folder path or an fsspec URL")
     from hollowtree.pipeline.workflow import CoarseSection, IngestSection, TreeSection
@@ -157,18 +140,13 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--processes", action="store_true",
                    help="make the local cluster's workers processes, not threads (starts about 1.5 s slower)")
     g.add_argument("--no-progress", action="store_true", help="no progress bars")
-    g.set_defaults(func=_cmd_ingest)
 
-    c = sub.add_parser(
-        "coarse",
-        help="coarse segments per tile (normals, Efficient RANSAC, DBSCAN), stitched across tiles",
-        description=(
-            "Run the paper's first stage on an ingested run store: PCA normals, Efficient "
-            "RANSAC primitives and DBSCAN per tile as Dask tasks, then join the tiles' "
-            "segments over their shared buffer points. Rerunning resumes: recorded tiles "
-            "are skipped."
-        ),
-    )
+    c = _command(sub, "coarse", _cmd_coarse,
+                 help="coarse segments per tile (normals, Efficient RANSAC, DBSCAN), stitched across tiles",
+                 description="Run the paper's first stage on an ingested run store: PCA normals, Efficient "
+                             "RANSAC primitives and DBSCAN per tile as Dask tasks, then join the tiles' "
+                             "segments over their shared buffer points. Rerunning resumes: recorded tiles "
+                             "are skipped.")
     c.add_argument("store", help="run store made by `hollowtree ingest`")
     _stage_flag(c, CoarseSection, "epsilon", "alpha", "cluster_epsilon", "min_support", "eps", "min_samples")
     c.add_argument("--no-free-segments", action="store_true",
@@ -177,68 +155,47 @@ def build_parser() -> argparse.ArgumentParser:
                 "seed")
     _set_flag(c, "coarse")
     _cluster_args(c)
-    c.set_defaults(func=_cmd_coarse)
 
     from hollowtree.pipeline.hollownet_cmd import add_labelled_args
     from hollowtree.pipeline.hollownet_cmd import add_parsers as add_hollownet_parsers
 
     add_hollownet_parsers(sub)  # train, classify
 
-    tr = sub.add_parser(
-        "tree",
-        help="the hierarchical tree with HollowNet for every coarse segment of a store",
-        description=(
-            "Build the paper's hierarchical tree (three projection sequences, the five-term "
-            "energy, greedy recursion) for every global coarse segment of a store, one Dask "
-            "task per batch of segments. Rerunning resumes: recorded batches are skipped."
-        ),
-    )
+    tr = _command(sub, "tree", _cmd_tree,
+                  help="the hierarchical tree with HollowNet for every coarse segment of a store",
+                  description="Build the paper's hierarchical tree (three projection sequences, the five-term "
+                              "energy, greedy recursion) for every global coarse segment of a store, one Dask "
+                              "task per batch of segments. Rerunning resumes: recorded batches are skipped.")
     tr.add_argument("store", help="run store after `hollowtree coarse`")
     _stage_flag(tr, TreeSection, "max_depth", "decision", "threshold", "batch_points", "max_group_points", "weights",
                 "device", "seed")
     _set_flag(tr, "tree")
     _cluster_args(tr)
-    tr.set_defaults(func=_cmd_tree)
 
-    lb = sub.add_parser(
-        "labels",
-        help="per-point labels of a store from its tree (or its coarse segments)",
-        description=(
-            "Write the per-point class, instance, segment and score arrays of a store after "
-            "`hollowtree coarse` and `hollowtree tree`, as `hollowtree run` does, so that "
-            "`hollowtree export` can follow. Without a complete tree stage (or with --no-tree) "
-            "the labels are the coarse segments', each classified whole. Rerunning resumes."
-        ),
-    )
+    lb = _command(sub, "labels", _cmd_labels, help="per-point labels of a store from its tree (or its coarse segments)",
+                  description="Write the per-point class, instance, segment and score arrays of a store after "
+                              "`hollowtree coarse` and `hollowtree tree`, as `hollowtree run` does, so that "
+                              "`hollowtree export` can follow. Without a complete tree stage (or with --no-tree) "
+                              "the labels are the coarse segments', each classified whole. Rerunning resumes.")
     lb.add_argument("store", help="run store after `hollowtree coarse` (and `hollowtree tree`)")
     lb.add_argument("--no-tree", action="store_true", help="label from the coarse segments even when the tree ran")
     _cluster_args(lb)
-    lb.set_defaults(func=_cmd_labels)
 
-    fe = sub.add_parser(
-        "fit-energy",
-        help="refit the tree's energy weights w and prior W on synthetic scenes",
-        description=(
-            "Scan the training scenes, collect split proposals with known targets and fit "
-            "xi = w . e by linear regression (docs/method.md). Same seed, same model."
-        ),
-    )
+    fe = _command(sub, "fit-energy", _cmd_fit_energy,
+                  help="refit the tree's energy weights w and prior W on synthetic scenes",
+                  description="Scan the training scenes, collect split proposals with known targets and fit "
+                              "xi = w . e by linear regression (docs/method.md). Same seed, same model.")
     fe.add_argument("--seed", type=int, default=0)
     fe.add_argument("--out", type=Path, default=Path("energy-v1.json"),
                     help="output JSON (default energy-v1.json; the shipped one is tree/data/energy-v1.json)")
     fe.add_argument("--overwrite", action="store_true", help="replace an existing output")
-    fe.set_defaults(func=_cmd_fit_energy)
 
-    fs = sub.add_parser(
-        "fit-split",
-        help="refit the tree's split model on the element groups of random scenes",
-        description=(
-            "Scan 52 random training scenes, run ingest and the coarse stage on each, collect "
-            "the split proposals of their element groups with known targets and fit the "
-            "gradient-boosted split model (docs/method.md). About 30 minutes on 2 cores; the "
-            "scenes' groups are kept in --work, so a stopped fit goes on where it stopped."
-        ),
-    )
+    fs = _command(sub, "fit-split", _cmd_fit_split,
+                  help="refit the tree's split model on the element groups of random scenes",
+                  description="Scan 52 random training scenes, run ingest and the coarse stage on each, collect "
+                              "the split proposals of their element groups with known targets and fit the "
+                              "gradient-boosted split model (docs/method.md). About 30 minutes on 2 cores; the "
+                              "scenes' groups are kept in --work, so a stopped fit goes on where it stopped.")
     fs.add_argument("--work", type=Path, default=Path("out/split-fit"),
                     help="folder for the scenes' element groups (default out/split-fit)")
     fs.add_argument("--seed", type=int, default=0)
@@ -253,17 +210,11 @@ def build_parser() -> argparse.ArgumentParser:
     fs.add_argument("--procedural-points", type=_positive_int, default=600_000,
                     help="points per procedural site (default 600,000)")
     add_labelled_args(fs, "element groups")
-    fs.set_defaults(func=_cmd_fit_split)
 
-    r = sub.add_parser(
-        "run",
-        help="run a workflow YAML: ingest -> coarse -> tree -> labels -> outputs",
-        description=(
-            "Run every stage of a workflow file on a local Dask cluster or a scheduler. "
-            "Rerunning resumes: recorded units are skipped; a changed parameter redoes its "
-            "stage and the ones after it. One run at a time per store."
-        ),
-    )
+    r = _command(sub, "run", _cmd_run, help="run a workflow YAML: ingest -> coarse -> tree -> labels -> outputs",
+                 description="Run every stage of a workflow file on a local Dask cluster or a scheduler. "
+                             "Rerunning resumes: recorded units are skipped; a changed parameter redoes its "
+                             "stage and the ones after it. One run at a time per store.")
     r.add_argument("workflow", nargs="?", type=Path, help="workflow YAML (see docs/workflows.md)")
     r.add_argument("--scheduler", help="Dask scheduler address (overrides cluster.scheduler)")
     r.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY.PATH=VALUE",
@@ -272,18 +223,13 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--job-script", action="store_true",
                    help="print the batch script of one job of cluster.jobqueue and exit (nothing is submitted)")
     r.add_argument("--no-progress", action="store_true", help="no progress bars")
-    r.set_defaults(func=_cmd_run)
 
-    ev = sub.add_parser(
-        "evaluate",
-        help="score the pipeline and two baselines against ground truth (the paper's Table 1)",
-        description=(
-            "For each INPUT (a synthetic site name, a LAS/LAZ with gt_class and gt_instance, or a "
-            "run store of such a scan) run the workflow (or read the store) and score RANSAC alone, "
-            "RANSAC + DBSCAN and the full tree: per class GT, found (IoU >= 0.5), accuracy, "
-            "precision and point IoU. Writes a JSON file and a four-panel PNG per input."
-        ),
-    )
+    ev = _command(sub, "evaluate", _cmd_evaluate,
+                  help="score the pipeline and two baselines against ground truth (the paper's Table 1)",
+                  description="For each INPUT (a synthetic site name, a LAS/LAZ with gt_class and gt_instance, or a "
+                              "run store of such a scan) run the workflow (or read the store) and score RANSAC alone, "
+                              "RANSAC + DBSCAN and the full tree: per class GT, found (IoU >= 0.5), accuracy, "
+                              "precision and point IoU. Writes a JSON file and a four-panel PNG per input.")
     ev.add_argument("inputs", nargs="+", metavar="INPUT", help="site name, LAS/LAZ file or run store")
     ev.add_argument("--workflow", type=Path, help="workflow YAML (default: workflows/local.yaml)")
     ev.add_argument("--store-dir", default="out/evaluate",
@@ -298,33 +244,28 @@ def build_parser() -> argparse.ArgumentParser:
                     help="run every input N times, coarse.seed and tree.seed raised by 0..N-1 (a store per "
                     "seed), and report the spread of the scores (default 1)")
     ev.add_argument("--no-progress", action="store_true", help="no progress bars")
-    ev.set_defaults(func=_cmd_evaluate)
 
-    it = sub.add_parser("init", help="write the example workflows into a folder, to edit and run",
-                        description="Copy the shipped example workflows (local.yaml: the whole pipeline on "
-                                    "this machine; laptop.yaml: one downsampled tile; cluster.yaml: a Dask "
-                                    "cluster and an object store) and their JSON schema into DIR.")
+    it = _command(sub, "init", _cmd_init, help="write the example workflows into a folder, to edit and run",
+                  description="Copy the shipped example workflows (local.yaml: the whole pipeline on "
+                              "this machine; laptop.yaml: one downsampled tile; cluster.yaml: a Dask "
+                              "cluster and an object store) and their JSON schema into DIR.")
     it.add_argument("dir", type=Path, help="folder to write them into (made if missing)")
     it.add_argument("--overwrite", action="store_true", help="replace files of the same names")
-    it.set_defaults(func=_cmd_init)
 
-    st = sub.add_parser("status", help="per stage: units done / total and the parameters used",
-                        description="Show what a run store holds: per stage, units done / total and parameters.")
+    st = _command(sub, "status", _cmd_status, help="per stage: units done / total and the parameters used",
+                  description="Show what a run store holds: per stage, units done / total and parameters.")
     st.add_argument("store", help="run store")
-    st.set_defaults(func=_cmd_status)
 
-    e = sub.add_parser(
-        "export", help="write labelled points (LAS/LAZ), tables (Parquet) or views (PNG) of a run",
-        description="Export the labels of a finished run: every input point in input order with "
-                    "class_id, instance_id, segment_id, score, primitive_id and the LAS classification; "
-                    "beside the LAS/LAZ, class styles for QGIS (.qml) and CloudCompare (.cc-classes.xml).",
-    )
+    e = _command(sub, "export", _cmd_export,
+                 help="write labelled points (LAS/LAZ), tables (Parquet) or views (PNG) of a run",
+                 description="Export the labels of a finished run: every input point in input order with "
+                             "class_id, instance_id, segment_id, score, primitive_id and the LAS classification; "
+                             "beside the LAS/LAZ, class styles for QGIS (.qml) and CloudCompare (.cc-classes.xml).")
     e.add_argument("store", help="run store")
     e.add_argument("--las", type=Path, help="output .las or .laz")
     e.add_argument("--parquet", type=Path, help="folder for segments.parquet (and tree.parquet)")
     e.add_argument("--png", type=Path, help="top and side views coloured by class")
     e.add_argument("--no-progress", action="store_true", help="no progress bar")
-    e.set_defaults(func=_cmd_export)
     from hollowtree.pipeline.view import add_parser as add_view_parser
 
     add_view_parser(sub)  # view: the store in the browser
@@ -369,14 +310,20 @@ def _cmd_labels(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_fit_energy(args: argparse.Namespace) -> int:
+def _check_out(out: Path, overwrite: bool) -> None:
+    """Fail before any work where the output file ``out`` could not be written."""
     from hollowtree.errors import ConfigError
+
+    if out.exists() and not overwrite:
+        raise ConfigError(f"{out} exists; pass --overwrite to replace it")
+    if not out.parent.is_dir():
+        raise ConfigError(f"{out}: folder {out.parent} does not exist")
+
+
+def _cmd_fit_energy(args: argparse.Namespace) -> int:
     from hollowtree.tree.fit import fit_energy_from_scenes
 
-    if args.out.exists() and not args.overwrite:
-        raise ConfigError(f"{args.out} exists; pass --overwrite to replace it")
-    if not args.out.parent.is_dir():
-        raise ConfigError(f"{args.out}: folder {args.out.parent} does not exist")
+    _check_out(args.out, args.overwrite)
     model = fit_energy_from_scenes(args.seed)
     model.save(args.out)
     w = ", ".join(f"e{i + 1} {v:.3f}" for i, v in enumerate(model.w))
@@ -392,10 +339,7 @@ def _cmd_fit_split(args: argparse.Namespace) -> int:
     from hollowtree.pipeline.split_fit import TRAINING_SCENES, fit_split_from_scenes
     from hollowtree.scenes.procedural import split_seeds
 
-    if args.out.exists() and not args.overwrite:
-        raise ConfigError(f"{args.out} exists; pass --overwrite to replace it")
-    if not args.out.parent.is_dir():
-        raise ConfigError(f"{args.out}: folder {args.out.parent} does not exist")
+    _check_out(args.out, args.overwrite)
     if not 0.0 < args.threshold < 1.0:
         raise ConfigError(f"--threshold must be between 0 and 1 (a probability); got {args.threshold}")
     if args.procedural < 0:
@@ -574,12 +518,6 @@ def _cmd_coarse(args: argparse.Namespace) -> int:
     return 0
 
 
-
-
-
-
-
-
 def _cmd_ingest(args: argparse.Namespace) -> int:
     import gc
 
@@ -605,8 +543,6 @@ def _cmd_ingest(args: argparse.Namespace) -> int:
         raise
     print(report.summary())
     return 0
-
-
 
 
 def _cmd_synth(args: argparse.Namespace) -> int:
