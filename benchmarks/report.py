@@ -57,6 +57,7 @@ VAL_VARIANTS = {
     "generalize-val-4m-tree-v21.json": "`tree-v21`: a minaret node's storeys cut judged by its bays",
     "generalize-val-4m-forts-tree-v20.json": "`tree-v20`, forts with bastions along their walls",
     "generalize-val-4m-forts-tree-v21.json": "`tree-v21`, forts with bastions along their walls",
+    "generalize-val-4m-check30.json": "`tree-v22`'s element check fitted on 30 training sites, threshold 0.2",
 }
 
 ELEMENTS = ("arch", "dome", "minaret", "pillar")

@@ -49,7 +49,7 @@ STAGE = "tree"
 #: Version of the tree's algorithm (tree/): part of the stage's parameters hash and of the
 #: workflow parameters a run records, so a store made by an older version is redone. What
 #: each version changed is in CHANGELOG.md (and git).
-TREE_ALGORITHM = "tree-v21"
+TREE_ALGORITHM = "tree-v22"
 #: Points sampled from each wall instance for the frames (tree/frames.py): a pier's face
 #: beside a bay's jamb is a strip a few tenths of a metre wide in a facade's wall.
 WALL_SAMPLE_POINTS = 16384
@@ -347,7 +347,7 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any, device: str = "c
     coarse = stages.get("coarse", {})
     if not coarse or coarse.get("done") != coarse.get("units"):
         raise PipelineError(f"store {url}: the coarse stage is not complete; run it first")
-    h = params_hash([params.to_dict(), coarse["params_hash"], TREE_ALGORITHM])
+    h = params_hash([params.to_dict(), coarse["params_hash"], TREE_ALGORITHM, _check_fingerprint(params)])
     cfg = {"params": params.to_dict(), "params_hash": h, "device": device}
     stage = Stage(store, STAGE, h)
     completed = stage.last.get("params_hash") == h
@@ -471,6 +471,23 @@ def element_instances(nodes: pa.Table, imap: np.ndarray, cmap: np.ndarray,
     g[known] = ground[seg[known] - 1]
     return instance_features(np.where(inst > 0, imap[inst], 0), cls, col["score"], col["n_points"],
                              np.column_stack([col[c] for c in _BOX]), col["depth"], seg, g)
+
+
+def _check_fingerprint(params: TreeStageParams) -> str | None:
+    """What the element check's file holds (a hash), so a store reruns its tree when the
+    check changes under the same path; None when the check is off."""
+    import hashlib
+    from pathlib import Path
+
+    from hollowtree.tree.verify import DEFAULT_VERIFY_PATH
+
+    if not params.verify:
+        return None
+    path = DEFAULT_VERIFY_PATH if params.verify_model is None else Path(params.verify_model)
+    try:
+        return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+    except OSError as e:
+        raise ConfigError(f"tree.verify_model: cannot read {path}: {e.strerror or e}") from None
 
 
 def _check_elements(nodes: pa.Table, imap: np.ndarray, cmap: np.ndarray, ground: np.ndarray,

@@ -490,3 +490,27 @@ def test_export_keeps_the_users_data(tmp_path, scan):
     lookup = next(v for v in got.header.vlrs if isinstance(v, ClassificationLookupVlr))
     assert lookup.lookups[LAS_CLASSIFICATION[ClassId.DOME]] == "dome"
     assert lookup.lookups[2] == "ground"
+
+
+def test_the_element_checks_decision_reaches_labels(tmp_path, scan):
+    """Every element instance takes the class the element check (tree/verify.py) gives it:
+    a check that believes every instance a pillar makes them pillars, one that believes
+    none makes them other; points in no element instance keep their class."""
+    from hollowtree.classes import ELEMENT_CLASSES
+    from hollowtree.tree.verify import VERIFY_FEATURES, ElementCheck, VerifyModel
+
+    leaf = {"feature": np.array([-2]), "threshold": np.array([0.0]), "left": np.array([-1]),
+            "right": np.array([-1]), "value": np.array([0.0])}
+    yes, no = (VerifyModel(init=v, learning_rate=0.1, trees=(leaf,)) for v in (4.0, -4.0))
+    assert len(VERIFY_FEATURES) == len(yes.feature_names)
+    _, off = _run(tmp_path / "off", scan, tree="{enabled: true, max_depth: 1, verify: false}")
+    elements = (off["instance"] > 0) & np.isin(off["class"], [int(c) for c in ELEMENT_CLASSES])
+    assert elements.any()
+    for believed, want in (({4: no, 5: no, 6: no, 7: yes}, ClassId.PILLAR), ({4: no, 5: no, 6: no, 7: no},
+                                                                              ClassId.OTHER)):
+        path = tmp_path / f"check-{want.label}.json"
+        ElementCheck(believed, threshold=0.5).save(path)
+        _, checked = _run(tmp_path / want.label, scan,
+                          tree=f"{{enabled: true, max_depth: 1, verify: true, verify_model: {path}}}")
+        assert (checked["class"][elements] == int(want)).all()
+        np.testing.assert_array_equal(checked["class"][~elements], off["class"][~elements])

@@ -1,0 +1,214 @@
+"""Fit the element check (tree/verify.py) and sweep its threshold.
+
+``fit``: every finished store of ``bench_generalize --split train`` work folders (run
+with the element check off), or of a user's labelled scans run through a workflow (their
+source files holding ``gt_class`` and ``gt_instance``), gives one row per element
+instance after the merge: its features (:func:`tree.verify.instance_features`) and the
+class of the element its final instance matches (IoU >= 0.5, any element class; none
+if it matches none). One gradient-boosted classifier per element class (the split
+model's settings) is fitted on them, its AUC measured by 5-fold cross-validation grouped
+by site, and the four are written as one :class:`tree.verify.ElementCheck` file. A
+procedural store of a seed that is not a training seed is refused.
+
+``sweep``: on the stores of a validation work folder (element check off), what each
+threshold would do (an instance takes its most probable class when that reaches the
+threshold, else ``other``; ``--reject-only`` never changes a class): found elements and
+precision per threshold, so the threshold is chosen on validation seeds. It ignores
+that a rejected arch no longer joins an arcade row, so the chosen threshold is checked
+with a real run.
+
+Run: ``python benchmarks/fit_verify.py fit out/gen-train --out tree/data/verify-v1.json
+--threshold T`` and ``python benchmarks/fit_verify.py sweep out/gen-val4m --model
+tree/data/verify-v1.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+if str(REPO) not in sys.path:
+    sys.path.insert(0, str(REPO))
+
+import numpy as np  # noqa: E402
+import pyarrow as pa  # noqa: E402
+
+from hollowtree.classes import ELEMENT_CLASSES, ClassId  # noqa: E402
+from hollowtree.pipeline.tree_stage import MERGE_MAP, _ground_levels, _merge_map, element_instances  # noqa: E402
+from hollowtree.scenes.procedural import SPLITS  # noqa: E402
+from hollowtree.tiling.readers import PointBlock, read_blocks  # noqa: E402
+from hollowtree.tiling.store import RunStore  # noqa: E402
+from hollowtree.tree.verify import VERIFY_FEATURES, ElementCheck, VerifyModel, load_verify_model  # noqa: E402
+
+_ELEMENTS = np.asarray([int(c) for c in ELEMENT_CLASSES])
+
+
+def _seed(store: Path) -> int | None:
+    """The procedural seed of a ``bench_generalize`` store (``gen-<seed>-<points>.zarr``), else None."""
+    parts = store.name.split("-")
+    return int(parts[1]) if len(parts) == 3 and parts[0] == "gen" and parts[1].isdigit() else None
+
+
+def _matches(gc: np.ndarray, gi: np.ndarray, pc: np.ndarray, pi: np.ndarray) -> dict[int, int]:
+    """Every predicted element instance (key instance * 256 + class) and the class of the
+    ground-truth element (any element class) it matches at IoU >= 0.5, or 0."""
+    gkey = np.where((gi > 0) & np.isin(gc, _ELEMENTS), gi.astype(np.int64) * 256 + gc, -1)
+    pkey = np.where((pi > 0) & np.isin(pc, _ELEMENTS), pi.astype(np.int64) * 256 + pc, -1)
+    both = (gkey >= 0) & (pkey >= 0)
+    g_sz = dict(zip(*np.unique(gkey[gkey >= 0], return_counts=True), strict=True))
+    p_sz = dict(zip(*np.unique(pkey[pkey >= 0], return_counts=True), strict=True))
+    out = {int(k): 0 for k in p_sz}
+    if both.any():
+        pairs, inter = np.unique(np.c_[pkey[both], gkey[both]], axis=0, return_counts=True)
+        for (p, g), n in zip(pairs.tolist(), inter.tolist(), strict=True):
+            if n / (p_sz[p] + g_sz[g] - n) >= 0.5:
+                out[int(p)] = int(g % 256)
+    return out
+
+
+def _found(m: dict[int, int]) -> tuple[int, int, dict[int, list[int]]]:
+    per = {int(c): [0, 0] for c in _ELEMENTS}
+    for k, g in m.items():
+        per[k % 256][1] += 1
+        if g == k % 256:
+            per[g][0] += 1
+    return sum(a for a, _ in per.values()), len(m), per
+
+
+def store_rows(path: Path) -> dict[str, np.ndarray]:
+    """Features, class, final key and rightness of every element instance of one store."""
+    store = RunStore.open(str(path))
+    tree = store.attrs["stages"]["tree"]
+    offsets = list(tree["instance_offsets"])
+    fmap = store.read_slice(MERGE_MAP).astype(np.int64)
+    tables = []
+    for b, off in enumerate(offsets):
+        t = store.read_table(f"tree/tables/{b}.parquet")
+        inst = np.asarray(t.column("instance").to_numpy(), dtype=np.int64)
+        tables.append(t.set_column(t.schema.get_field_index("instance"), "instance",
+                                   pa.array(np.where(inst > 0, inst + off, 0))))
+    nodes = pa.concat_tables(tables)
+    imap, cmap = _merge_map(nodes, len(fmap) - 1)
+    ids, cls, feats = element_instances(nodes, imap, cmap, _ground_levels(store))
+    src = store.attrs["sources"][0]["path"]
+    b = PointBlock.concat(read_blocks(src))
+    n = len(b)
+    pc = store.read_slice("labels/class", 0, n).astype(np.int64)
+    pi = store.read_slice("labels/instance", 0, n).astype(np.int64)
+    gc, gi = np.asarray(b.extra["gt_class"], np.int64), np.asarray(b.extra["gt_instance"], np.int64)
+    match = _matches(gc, gi, pc, pi)
+    keys = fmap[ids] * 256 + cls
+    return {"features": feats, "cls": cls, "key": keys, "target": np.asarray([match.get(int(k), 0) for k in keys]),
+            "gc": np.asarray(b.extra["gt_class"], np.int64), "gi": np.asarray(b.extra["gt_instance"], np.int64),
+            "pc": pc, "pi": pi}
+
+
+def _stores(paths: list[Path]) -> list[Path]:
+    """The finished stores (labels complete) of ``bench_generalize`` work folders, or the stores named."""
+    out = []
+    for p in [s for w in paths for s in (sorted((w / "stores").glob("*.zarr")) if (w / "stores").is_dir() else [w])]:
+        labels = RunStore.open(str(p)).attrs.get("stages", {}).get("labels", {})
+        if labels and labels.get("done") == labels.get("units"):
+            out.append(p)
+    return out
+
+
+def fit(work: list[Path], out: Path, threshold: float) -> int:
+    from sklearn.ensemble import GradientBoostingClassifier
+    from sklearn.metrics import roc_auc_score
+    from sklearn.model_selection import GroupKFold
+
+    lo, hi = SPLITS["train"]
+    xs, ys, groups = [], [], []
+    for k, s in enumerate(_stores(work)):
+        seed = _seed(s)
+        if seed is not None and not lo <= seed < hi:
+            raise SystemExit(f"{s}: not a training seed ({lo}-{hi - 1}); the element check is fitted on training seeds")
+        r = store_rows(s)
+        xs.append(r["features"])
+        ys.append(r["target"])
+        groups.append(np.full(len(r["target"]), seed if seed is not None else -1 - k))
+        print(f"{s.name}: {len(r['target'])} instances, {int((r['target'] == r['cls']).sum())} right", flush=True)
+    x, y, g = np.vstack(xs), np.concatenate(ys), np.concatenate(groups)
+
+    def model() -> GradientBoostingClassifier:
+        return GradientBoostingClassifier(n_estimators=150, max_depth=3, learning_rate=0.05, subsample=0.8,
+                                          random_state=0)
+
+    models, info = {}, {"sites": sorted({int(v) for v in g if v >= 0}), "files": int(len({int(v) for v in g if v < 0})),
+                        "instances": int(len(y)), "auc": {}}
+    for c in _ELEMENTS.tolist():
+        yc = (y == c).astype(int)
+        oof = np.zeros(len(yc))
+        for tr, te in GroupKFold(n_splits=5).split(x, yc, g):
+            oof[te] = model().fit(x[tr], yc[tr]).predict_proba(x[te])[:, 1]
+        info["auc"][ClassId(c).label] = round(float(roc_auc_score(yc, oof)), 4)
+        m = model().fit(x, yc)
+        models[c] = VerifyModel.from_sklearn(m, info={"positives": int(yc.sum())})
+        imp = sorted(zip(m.feature_importances_.tolist(), VERIFY_FEATURES, strict=True), reverse=True)
+        print(ClassId(c).label, int(yc.sum()), "AUC", info["auc"][ClassId(c).label], "|",
+              ", ".join(f"{n} {v:.2f}" for v, n in imp[:6]), flush=True)
+    ElementCheck(models=models, threshold=threshold, info=info).save(out)
+    return 0
+
+
+def sweep(work: list[Path], model_path: Path | None, thresholds: list[float], relabel: bool) -> int:
+    check = load_verify_model(model_path)
+    rows = [store_rows(s) for s in _stores(work)]
+    base = [_found(_matches(r["gc"], r["gi"], r["pc"], r["pi"])) for r in rows]
+    f0, p0 = sum(b[0] for b in base), sum(b[1] for b in base)
+    print(f"no check: found {f0}, predicted {p0}, precision {100 * f0 / max(p0, 1):.1f}%")
+    print(f"{'threshold':>9} {'found':>6} {'pred':>6} {'precision':>9}  per class found/pred")
+    for t in thresholds:
+        found = pred = 0
+        per: dict[int, list[int]] = {int(c): [0, 0] for c in _ELEMENTS}
+        for r in rows:
+            p = check.probabilities(r["features"])
+            best = p.argmax(axis=1) if len(p) else np.zeros(0, dtype=np.int64)
+            new = np.where(p[np.arange(len(p)), best] >= t, _ELEMENTS[best], 0) if len(p) else best
+            if not relabel and len(p):
+                new = np.where(p[np.arange(len(p)), np.searchsorted(_ELEMENTS, r["cls"])] >= t, r["cls"], 0)
+            pc, pi = r["pc"].copy(), r["pi"].copy()
+            pkey = pi * 256 + pc
+            for k, c in zip(r["key"].tolist(), new.tolist(), strict=True):
+                if c == k % 256:
+                    continue
+                sel = pkey == k
+                if c == 0:
+                    pi[sel] = 0
+                    pc[sel] = 8
+                else:
+                    pc[sel] = c
+            fnd, prd, pc_ = _found(_matches(r["gc"], r["gi"], pc, pi))
+            found += fnd
+            pred += prd
+            for c, (a, b) in pc_.items():
+                per[c][0] += a
+                per[c][1] += b
+        print(f"{t:>9.2f} {found:>6} {pred:>6} {100 * found / max(pred, 1):>8.1f}%  "
+              + " ".join(f"{ClassId(c).label}:{a}/{b}" for c, (a, b) in per.items()), flush=True)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    f = sub.add_parser("fit")
+    f.add_argument("work", type=Path, nargs="+", help="bench_generalize work folders (training split) or stores")
+    f.add_argument("--out", type=Path, required=True)
+    f.add_argument("--threshold", type=float, default=0.5)
+    s = sub.add_parser("sweep")
+    s.add_argument("work", type=Path, nargs="+", help="bench_generalize work folders (validation split) or stores")
+    s.add_argument("--model", type=Path, default=None)
+    s.add_argument("--thresholds", type=float, nargs="+", default=[0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+    s.add_argument("--reject-only", action="store_true", help="never change an instance's class, only reject it")
+    a = ap.parse_args(argv)
+    if a.cmd == "fit":
+        return fit(a.work, a.out, a.threshold)
+    return sweep(a.work, a.model, a.thresholds, not a.reject_only)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
