@@ -342,25 +342,11 @@ def test_a_store_on_s3_gives_the_same_view(server, store, monkeypatch):
     """The same store on S3 (a moto server): the same counts, nodes and tree paths."""
     pytest.importorskip("moto", reason="moto[server] is a dev dependency")
     s3fs = pytest.importorskip("s3fs", reason="s3fs is a dev dependency")
-    import socket
-    import time
+    from moto_s3 import moto_server
 
     from hollowtree.pipeline.view_store import ViewStore
 
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    moto = subprocess.Popen([sys.executable, "-m", "moto.server", "-H", "127.0.0.1", "-p", str(port)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
-        for _ in range(100):
-            try:
-                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
-                break
-            except OSError:
-                time.sleep(0.1)
-        env = {"AWS_ACCESS_KEY_ID": "test", "AWS_SECRET_ACCESS_KEY": "test", "AWS_DEFAULT_REGION": "us-east-1",
-               "AWS_ENDPOINT_URL": f"http://127.0.0.1:{port}"}
+    with moto_server() as env:
         for k, v in env.items():
             monkeypatch.setenv(k, v)
         fs = s3fs.S3FileSystem(key="test", secret="test", endpoint_url=env["AWS_ENDPOINT_URL"])
@@ -377,6 +363,3 @@ def test_a_store_on_s3_gives_the_same_view(server, store, monkeypatch):
             np.testing.assert_array_equal(a[k], b[k])
         roots, _ = remote.tree().roots(5)
         assert roots == local.tree().roots(5)[0]
-    finally:
-        moto.kill()
-        moto.wait()
