@@ -37,6 +37,10 @@ LATEST = {
     "val-4m": "generalize-val-4m-forts-tree-v21.json",
     "val-1m": "generalize-val-density-1m-forts-tree-v21.json",
     "val-10m": "generalize-val-density-10m-tree-v21.json",
+    "val": "generalize-val-tree-v22.json",
+    # the element check (tree.verify=true, not the default) on the same test sites
+    "test-check": "generalize-test-check-tree-v22.json",
+    "test-5m-check": "generalize-test-5m-check-tree-v22.json",
     # the latest run with the paper's energy path (later runs passed --no-energy)
     "test-energy": "generalize-test.json",
 }
@@ -105,7 +109,9 @@ def _seeds(d: dict) -> str:
 def generalize_figures() -> str:
     """The headline of issue 43: found and precision per split and density."""
     rows = [("test", "test split"), ("test-5m", "test split, 5 M points"),
-            ("val-4m", "validation, 4 M points"), ("val-1m", "validation, 1 M points"),
+            ("test-check", "test split, `tree.verify: true`"),
+            ("test-5m-check", "test split, 5 M points, `tree.verify: true`"),
+            ("val", "validation"), ("val-4m", "validation, 4 M points"), ("val-1m", "validation, 1 M points"),
             ("val-10m", "validation, 10 M points")]
     out = ["| sites | seeds | points per site | tree | arch | dome | minaret | pillar | all found | precision | source |",
            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]

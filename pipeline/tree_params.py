@@ -116,7 +116,7 @@ class TreeStageParams(Params, owner="tree"):
             "such test")
 
     verify: bool = param(
-        True, doc="the element check (tree/verify.py): a learned decision on every element instance after the "
+        False, doc="the element check (tree/verify.py): a learned decision on every element instance after the "
                    "merge, from its class, score, points, box and height above the ground; an instance it does not "
                    "believe becomes other, or takes the element class it believes")
     verify_model: str | None = param(
