@@ -44,8 +44,20 @@ def moto_server(log: Path | None = None) -> Iterator[dict[str, str]]:
                 if server.poll() is not None or time.monotonic() > deadline:
                     raise RuntimeError(f"the moto S3 server did not start on port {port}") from None
                 time.sleep(0.1)
+        _forget_s3_clients()
         yield {"AWS_ACCESS_KEY_ID": "test", "AWS_SECRET_ACCESS_KEY": "test", "AWS_DEFAULT_REGION": "us-east-1",
                "AWS_ENDPOINT_URL": f"http://127.0.0.1:{port}"}
     finally:
         server.kill()
         server.wait()
+        _forget_s3_clients()
+
+
+def _forget_s3_clients() -> None:
+    """Drop the S3 filesystems fsspec keeps per process: one made against an earlier
+    server (its endpoint taken from the environment then) would be reused, and fail."""
+    try:
+        import s3fs
+    except ImportError:
+        return
+    s3fs.S3FileSystem.clear_instance_cache()
