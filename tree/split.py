@@ -38,11 +38,10 @@ from typing import Any, ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from hollowtree.arrays import FloatArray
 from hollowtree.classes import CLASS_NAMES, ELEMENT_CLASSES, NUM_CLASSES
 
 __all__ = ["DEFAULT_SPLIT_PATH", "FEATURE_NAMES", "N_PROBS", "SplitModel", "load_split_model", "split_features"]
-
-FloatArray = npt.NDArray[np.float64]
 
 #: The split model shipped with the package.
 DEFAULT_SPLIT_PATH = Path(__file__).resolve().parent / "data" / "split-v1.json"

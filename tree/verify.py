@@ -31,13 +31,12 @@ from typing import Any, ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from hollowtree.arrays import FloatArray, IntArray
 from hollowtree.classes import ELEMENT_CLASSES, ClassId, class_id
 from hollowtree.tree.split import SplitModel
 
 __all__ = ["DEFAULT_VERIFY_PATH", "VERIFY_FEATURES", "ElementCheck", "VerifyModel", "instance_features",
            "load_verify_model"]
-
-FloatArray = npt.NDArray[np.float64]
 
 #: The element check shipped with the package.
 DEFAULT_VERIFY_PATH = Path(__file__).resolve().parent / "data" / "verify-v1.json"
@@ -62,7 +61,7 @@ class VerifyModel(SplitModel):
 def instance_features(
     instance: npt.ArrayLike, class_id: npt.ArrayLike, score: npt.ArrayLike, n_points: npt.ArrayLike,
     bbox: npt.ArrayLike, depth: npt.ArrayLike, segment: npt.ArrayLike, ground: npt.ArrayLike,
-) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], FloatArray]:
+) -> tuple[IntArray, IntArray, FloatArray]:
     """The features (:data:`VERIFY_FEATURES`) of every element instance, from its tree nodes.
 
     Parameters
@@ -146,7 +145,7 @@ class ElementCheck:
         return np.column_stack([self.models[c].probability(f) if c in self.models else np.zeros(len(f))
                                 for c in _ELEMENTS]) if len(f) else np.zeros((0, len(_ELEMENTS)))
 
-    def decide(self, features: npt.ArrayLike) -> npt.NDArray[np.int64]:
+    def decide(self, features: npt.ArrayLike) -> IntArray:
         """The class of each instance: the most probable element class, or ``other``
         where no class reaches the threshold.
 
