@@ -479,15 +479,16 @@ def _check_fingerprint(params: TreeStageParams) -> str | None:
     import hashlib
     from pathlib import Path
 
-    from hollowtree.tree.verify import DEFAULT_VERIFY_PATH
+    from hollowtree.tree.verify import DEFAULT_VERIFY_PATH, load_verify_model
 
     if not params.verify:
         return None
     path = DEFAULT_VERIFY_PATH if params.verify_model is None else Path(params.verify_model)
     try:
-        return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
-    except OSError as e:
-        raise ConfigError(f"tree.verify_model: cannot read {path}: {e.strerror or e}") from None
+        load_verify_model(path)  # a bad file is refused before any batch runs
+    except ConfigError as e:
+        raise ConfigError(f"tree.verify_model: {e}") from None
+    return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
 
 
 def _check_elements(nodes: pa.Table, imap: np.ndarray, cmap: np.ndarray, ground: np.ndarray,

@@ -33,6 +33,7 @@ import numpy.typing as npt
 
 from hollowtree.arrays import FloatArray, IntArray
 from hollowtree.classes import ELEMENT_CLASSES, ClassId, class_id
+from hollowtree.errors import ConfigError
 from hollowtree.tree.split import SplitModel
 
 __all__ = ["DEFAULT_VERIFY_PATH", "VERIFY_FEATURES", "ElementCheck", "VerifyModel", "instance_features",
@@ -184,7 +185,11 @@ def load_verify_model(path: str | Path | None = None) -> ElementCheck:
 
 @functools.lru_cache(maxsize=4)
 def _load(path: str) -> ElementCheck:
-    check = ElementCheck.from_dict(json.loads(Path(path).read_text()))
+    try:
+        check = ElementCheck.from_dict(json.loads(Path(path).read_text()))
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        reason = e.strerror if isinstance(e, OSError) and e.strerror else e
+        raise ConfigError(f"{path} is not a readable element check: {reason}") from None
     if not math.isfinite(check.threshold):
-        raise ValueError(f"{path}: the element check's threshold is not a number")
+        raise ConfigError(f"{path}: the element check's threshold is not a number")
     return check
