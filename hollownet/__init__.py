@@ -5,41 +5,12 @@ registry and checkpoints; ``predict`` the batched :class:`Classifier` (one per p
 ``dataset`` makes training data from synthetic scans; ``train`` trains and reports.
 """
 
-from hollowtree.hollownet.model import (
-    DEFAULT_WEIGHTS,
-    NUM_OUTPUTS,
-    OUTPUT_CLASSES,
-    HollowNet,
-    WeightsError,
-    get_model,
-    hollownet_v1,
-    list_models,
-    load_model,
-)
-from hollowtree.hollownet.predict import Classifier, Prediction
-from hollowtree.hollownet.voxels import (
-    EMPTY,
-    OCCUPIED,
-    DegenerateSegmentError,
-    voxelize,
-    voxelize_batch,
-)
+from hollowtree.exports import lazy_exports
 
-__all__ = [
-    "DEFAULT_WEIGHTS",
-    "EMPTY",
-    "NUM_OUTPUTS",
-    "OCCUPIED",
-    "OUTPUT_CLASSES",
-    "Classifier",
-    "DegenerateSegmentError",
-    "HollowNet",
-    "Prediction",
-    "WeightsError",
-    "get_model",
-    "hollownet_v1",
-    "list_models",
-    "load_model",
-    "voxelize",
-    "voxelize_batch",
-]
+# Imported on first use: the package does not load torch until a name of it is used.
+__all__, __getattr__ = lazy_exports(__name__, {
+    "model": "DEFAULT_WEIGHTS NUM_OUTPUTS OUTPUT_CLASSES HollowNet WeightsError get_model hollownet_v1 list_models "
+             "load_model",
+    "predict": "Classifier Prediction",
+    "voxels": "EMPTY OCCUPIED DegenerateSegmentError voxelize voxelize_batch",
+})

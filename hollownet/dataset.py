@@ -44,6 +44,7 @@ from hollowtree.errors import ConfigError, CorruptInputError, InputFileError
 from hollowtree.hollownet._scenes import RECIPES, random_scene
 from hollowtree.hollownet.model import OUTPUT_CLASSES
 from hollowtree.hollownet.voxels import GRID_SIZE, OCCUPIED, voxelize_batch
+from hollowtree.params import Params, param
 from hollowtree.scenes.scanner import ScanParams, scan
 
 __all__ = [
@@ -68,38 +69,18 @@ _MAX_POINTS = 200_000
 
 
 @dataclass(frozen=True, kw_only=True)
-class DatasetParams:
-    """What a data set is made of; equal parameters give identical data.
+class DatasetParams(Params, owner="DatasetParams"):
+    """What a data set is made of; equal parameters give identical data. Each field is
+    declared once (``hollowtree.params``): its default, range and meaning."""
 
-    Parameters
-    ----------
-    seed : int
-        Seeds the scenes, the scans and the augmentation.
-    split : {"train", "test", "heldout"}
-        Mixed into the seed, so the splits of one seed never share a scene.
-    n_per_class : int
-        Samples of every output class.
-    variants : int
-        Augmented samples cut from one scanned instance (ground and roof: twice as many).
-    grid_size : int
-    canonical_yaw : bool
-        Voxelise with the footprint's principal axis along x.
-    """
-
-    seed: int = 0
-    split: str = "train"
-    n_per_class: int = 300
-    variants: int = 3
-    grid_size: int = GRID_SIZE
-    canonical_yaw: bool = True
-
-    def __post_init__(self) -> None:
-        if self.split not in _SPLITS:
-            raise ConfigError(f"The 'split' parameter must be one of {sorted(_SPLITS)}. Got {self.split!r} instead.")
-        for name in ("n_per_class", "variants", "grid_size"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ConfigError(f"The {name!r} parameter must be a positive int. Got {v!r} instead.")
+    seed: int = param(0, doc="seeds the scenes, the scans and the augmentation")
+    split: str = param("train", choices=tuple(_SPLITS),
+                       doc="mixed into the seed, so the splits of one seed never share a scene")
+    n_per_class: int = param(300, ge=1, doc="samples of every output class")
+    variants: int = param(3, ge=1, doc="augmented samples cut from one scanned instance (ground and roof: twice "
+                                       "as many)")
+    grid_size: int = param(GRID_SIZE, ge=1, doc="edge of the voxel grid, cells")
+    canonical_yaw: bool = param(True, doc="voxelise with the footprint's principal axis along x")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -295,11 +276,11 @@ def labelled_samples(
     gt_class: npt.ArrayLike,
     gt_instance: npt.ArrayLike,
     *,
-    seed: int = 0,
-    variants: int = 3,
+    seed: int = DatasetParams.seed,
+    variants: int = DatasetParams.variants,
     holdout: float = 0.2,
-    grid_size: int = GRID_SIZE,
-    canonical_yaw: bool = True,
+    grid_size: int = DatasetParams.grid_size,
+    canonical_yaw: bool = DatasetParams.canonical_yaw,
     source: str = "labelled",
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Training and test samples cut from a user's labelled scan (``hollowtree train --from``).

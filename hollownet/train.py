@@ -49,6 +49,7 @@ from hollowtree.hollownet.model import (
     load_checkpoint,
     save_checkpoint,
 )
+from hollowtree.params import Params, like, param
 
 __all__ = ["TrainConfig", "TrainReport", "confusion_matrix", "format_confusion", "grids_to_input",
            "default_data_dir", "resolve_device", "train", "evaluate"]
@@ -63,40 +64,27 @@ def default_data_dir() -> Path:
 
 
 @dataclass(frozen=True, kw_only=True)
-class TrainConfig:
+class TrainConfig(Params, owner="TrainConfig"):
     """Settings of one training run (``hollowtree train --config FILE`` reads these keys).
 
-    The defaults made the shipped weights.
+    The defaults made the shipped weights. Each field is declared once
+    (``hollowtree.params``); ``seed`` and ``variants`` are the data sets'
+    (:class:`~hollownet.dataset.DatasetParams`).
     """
 
-    arch: str = "hollownet_v1"
-    seed: int = 0
-    n_train: int = 400
-    n_test: int = 60
-    variants: int = 3
-    epochs: int = 16
-    batch_size: int = 32
-    lr: float = 0.001
-    weight_decay: float = 0.0
-    amp: bool = True
-    threads: int = 2
+    arch: str = param("hollownet_v1", check=lambda v: None if v in list_models() else
+                      f"must be one of {list_models()}", doc="the network (hollownet.model registry)")
+    seed: int = like(DatasetParams, "seed")
+    n_train: int = param(400, ge=1, doc="training samples of every output class")
+    n_test: int = param(60, ge=1, doc="test samples of every output class (other scenes)")
+    variants: int = like(DatasetParams, "variants")
+    epochs: int = param(16, ge=1, doc="passes over the training set")
+    batch_size: int = param(32, ge=1, doc="samples per optimiser step")
+    lr: float = param(0.001, gt=0, lt=10, doc="Adam's learning rate (cosine decay to 0 over the epochs)")
+    weight_decay: float = param(0.0, ge=0, lt=10, doc="Adam's weight decay")
+    amp: bool = param(True, doc="bfloat16 autocast of the forward pass on CUDA or a CPU with AMX")
+    threads: int = param(2, ge=1, doc="torch's CPU threads")
     data_dir: str | None = field(default=None, compare=False)
-
-    def __post_init__(self) -> None:
-        if self.arch not in list_models():
-            raise ConfigError(f"The 'arch' parameter must be one of {list_models()}. Got {self.arch!r} instead.")
-        for name in ("n_train", "n_test", "variants", "epochs", "batch_size", "threads"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ConfigError(f"The {name!r} parameter of TrainConfig must be a positive int. Got {v!r} instead.")
-        for name in ("lr", "weight_decay"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0 <= v < 10) or (name == "lr" and v == 0):
-                raise ConfigError(f"The {name!r} parameter of TrainConfig must be a number in [0, 10). Got {v!r} instead.")
-        if not isinstance(self.amp, bool):
-            raise ConfigError(f"The 'amp' parameter of TrainConfig must be true or false. Got {self.amp!r} instead.")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int):
-            raise ConfigError(f"The 'seed' parameter of TrainConfig must be an int. Got {self.seed!r} instead.")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

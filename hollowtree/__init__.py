@@ -25,18 +25,10 @@ if (_source / "pyproject.toml").is_file() and (_source / "pipeline" / "__init__.
     # them (pipeline/, tiling/, tree/, ...); a wheel installs them inside it.
     __path__.append(str(_source))
 
+from hollowtree.exports import lazy_exports as _lazy_exports  # noqa: E402
+
 __version__ = "0.1.0"
-__all__ = ["Workflow", "LabelledScan", "load_workflow", "open", "run", "__version__"]
-
-
-def __getattr__(name: str):
-    # Lazy: ``import hollowtree`` stays light (the command line imports it first).
-    if name in ("run", "open", "LabelledScan"):
-        from hollowtree import api
-
-        return getattr(api, name)
-    if name in ("Workflow", "load_workflow"):
-        from hollowtree.pipeline import workflow
-
-        return getattr(workflow, name)
-    raise AttributeError(f"module 'hollowtree' has no attribute {name!r}")
+# Lazy: ``import hollowtree`` stays light (the command line imports it first).
+_names, __getattr__ = _lazy_exports(__name__, {"api": "LabelledScan open run",
+                                               "pipeline.workflow": "Workflow load_workflow"})
+__all__ = [*_names, "__version__"]

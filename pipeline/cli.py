@@ -21,7 +21,7 @@ from hollowtree.pipeline.cli_args import (
     _cluster_args,
     _float,
     _int_list,
-    _non_negative,
+    _param_flag,
     _positive_int,
     _section,
     _set_flag,
@@ -95,26 +95,18 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="store_true", help="log hollowtree's debug messages")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
+    from hollowtree.scenes.scan_params import DEFAULT_POINTS, ScanParams
+
     s = _command(sub, "synth", _cmd_synth,
                  help="make a labelled synthetic scan of a site (LAS/LAZ with gt_class, gt_instance)")
     s.late_description = _synth_description
     s.add_argument("site", help="site or test scene name")
     s.add_argument("--out", required=True, type=Path, help="output .laz or .las file")
     size = s.add_mutually_exclusive_group()
-    size.add_argument(
-        "--points", type=_positive_int, help="aim at about N points (default 1,000,000)"
-    )
+    size.add_argument("--points", type=_positive_int, help=f"aim at about N points (default {DEFAULT_POINTS:,})")
     size.add_argument("--step", type=_float, help="angular step of the scanner, degrees")
     s.add_argument("--stations", type=_positive_int, help="use the first K stations of the site")
-    s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    s.add_argument(
-        "--noise", type=_non_negative, default=0.0025,
-        help="range noise standard deviation at 10 m, metres (default 0.0025)",
-    )
-    s.add_argument(
-        "--registration-error", type=_non_negative, default=0.0,
-        help="per-station registration error, metres (default 0)",
-    )
+    _param_flag(s, ScanParams, "seed", "noise", "registration_error")
     s.add_argument("--crs", help="coordinate reference system to record, e.g. EPSG:32643")
     s.add_argument("--overwrite", action="store_true", help="replace an existing output")
     s.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -562,6 +554,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     def on_rays(n: int) -> None:
         bars[-1].update(n)
 
+    # the scan's settings given (the others: ScanParams' defaults)
+    scan = {k: v for k in ("seed", "noise", "registration_error") if (v := getattr(args, k)) is not None}
     try:
         result = synth(
             args.site,
@@ -569,13 +563,11 @@ def _cmd_synth(args: argparse.Namespace) -> int:
             n_points=args.points,
             step_deg=args.step,
             n_stations=args.stations,
-            seed=args.seed,
-            noise=args.noise,
-            registration_error=args.registration_error,
             crs=args.crs,
             overwrite=args.overwrite,
             on_rays=on_rays,
             on_total=on_total,
+            **scan,
         )
     finally:
         for bar in bars:

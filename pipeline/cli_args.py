@@ -52,14 +52,33 @@ def _one_flag(parser: argparse.ArgumentParser, section: Any, key: str, **kwargs:
     import typing
 
     field = section.model_fields[key]
-    text = (field.description or "").replace("%", "%%")
-    if field.default is not None and not isinstance(field.default, (bool, list)):
-        d = field.default
-        text += f" (default {d:,})" if isinstance(d, int) else f" (default {d:g})" if isinstance(d, float) else f" (default {d})"
     kinds = [typing.get_args(a)[0] if typing.get_origin(a) is typing.Annotated else a
              for a in (typing.get_args(field.annotation) or (field.annotation,)) if a is not type(None)]
-    if typing.get_origin(field.annotation) is typing.Literal:
-        kwargs.setdefault("choices", list(typing.get_args(field.annotation)))
+    choices = typing.get_args(field.annotation) if typing.get_origin(field.annotation) is typing.Literal else None
+    _flag(parser, key, field.description or "", field.default, kinds, choices, **kwargs)
+
+
+def _param_flag(parser: argparse.ArgumentParser, params: type, *keys: str, **kwargs: Any) -> None:
+    """The flags ``--key-name`` for the fields ``keys`` of the params dataclass ``params``
+    (``hollowtree.params``): their help, default, type and choices are the field's; their
+    bounds are checked by the dataclass. Not given = the field's default."""
+    from hollowtree.params import specs
+
+    declared = {s.name: s for s in specs(params)}
+    for key in keys:
+        spec = declared[key]
+        _flag(parser, key, spec.rule.doc, spec.default, list(spec.kinds), spec.rule.choices, **kwargs)
+
+
+def _flag(parser: argparse.ArgumentParser, key: str, doc: str, default: Any, kinds: list[Any],
+          choices: tuple[Any, ...] | None, **kwargs: Any) -> None:
+    """``--key-name``, not given = None: ``doc`` and the default as its help."""
+    text = doc.replace("%", "%%")
+    if default is not None and not isinstance(default, (bool, list, tuple)):
+        d = default
+        text += f" (default {d:,})" if isinstance(d, int) else f" (default {d:g})" if isinstance(d, float) else f" (default {d})"
+    if choices is not None:
+        kwargs.setdefault("choices", list(choices))
     elif kinds in ([int], [float]):
         kwargs.setdefault("type", _int if kinds == [int] else _float)
     parser.add_argument(f"--{key.replace('_', '-')}", dest=key, default=None, help=text, **kwargs)

@@ -1,7 +1,8 @@
 """The tree stage's parameters, declared once (``hollowtree.params``):
-:class:`TreeStageParams`, run by ``pipeline/tree_stage.py``. A light module (no NumPy, no
-tree): the workflow's ``tree`` section and the command line's flags are derived from
-these fields.
+:class:`TreeStageParams`, run by ``pipeline/tree_stage.py``. A light module (no NumPy; of
+the tree only ``tree/build_params.py``, whose ``max_depth``, ``look_ahead`` and
+``threshold`` it passes on): the workflow's ``tree`` section and the command line's flags
+are derived from these fields.
 """
 
 from __future__ import annotations
@@ -11,7 +12,8 @@ from pathlib import Path
 from typing import Any
 
 from hollowtree.errors import ConfigError
-from hollowtree.params import Params, param
+from hollowtree.params import Params, like, param
+from hollowtree.tree.build_params import BuildParams
 
 __all__ = ["DECISIONS", "DEVICES", "MIN_GROUP_SAMPLE", "TreeStageParams"]
 
@@ -30,17 +32,12 @@ class TreeStageParams(Params, owner="tree"):
 
     Parameters
     ----------
-    max_depth : int
-        The paper's ``d``.
-    look_ahead : bool
-        A wall's storeys cut that no proposal beats is kept when one of its storeys with a
-        row of openings would be cut into bays (``tree.build.build_tree(look_ahead=)``).
+    max_depth, look_ahead, threshold
+        The recursion's (``tree.build_params.BuildParams``), passed on to
+        ``tree.build.build_tree``.
     decision : str
         ``"split-model"`` (the learned split model, ``tree/data/split-v1.json``) or
         ``"energy"`` (the paper's ``xi = w . e``, ``tree/data/energy-v1.json``).
-    threshold : float or None
-        A split is kept when its score (the split model's probability, or ``xi``) reaches
-        this; None = the model's own.
     batch_points : int
         Points per task (small segments are batched; a larger segment is one task).
     weights : str or None
@@ -73,17 +70,13 @@ class TreeStageParams(Params, owner="tree"):
         (``tree.tall.not_clutter``); None turns that test off.
     """
 
-    max_depth: int = param(3, ge=0, doc="maximum depth d of Algorithm 1")
-    look_ahead: bool = param(
-        True, doc="a storeys split that its own score rejects is kept when one of its storeys would split (into "
-                  "bays): a storey cut is judged by what it leads to")
+    max_depth: int = like(BuildParams, "max_depth")
+    look_ahead: bool = like(BuildParams, "look_ahead")
     decision: str = param(
         "split-model", choices=DECISIONS,
         doc="how a node's best proposal is chosen and kept: the learned split model (tree/data/split-v1.json) or "
             "the paper's energy xi = w . e (tree/data/energy-v1.json)")
-    threshold: float | None = param(
-        None, doc="a split is kept when its score (the split model's probability, or xi) >= this; null = the "
-                  "model's own")
+    threshold: float | None = like(BuildParams, "threshold")
     batch_points: int = param(200_000, ge=1, doc="points per tree task (small segments are batched)")
     weights: str | None = param(None, doc="HollowNet weights file; null = the shipped default")
     split_model: str | None = param(

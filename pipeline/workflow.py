@@ -40,6 +40,7 @@ from hollowtree.errors import ConfigError
 from hollowtree.params import Spec, specs
 from hollowtree.pipeline.tree_params import DEVICES, TreeStageParams
 from hollowtree.primitives.coarse_params import CoarseParams
+from hollowtree.scenes.scan_params import DEFAULT_POINTS, ScanParams
 from hollowtree.tiling.ingest_params import IngestParams
 
 __all__ = ["Workflow", "WorkflowError", "load_workflow", "json_schema", "apply_override", "shipped_workflows"]
@@ -60,8 +61,8 @@ class SynthInput(_Section):
     """A synthetic scan made by ``hollowtree synth`` the first time the workflow runs."""
 
     site: str = Field("wazir_khan", description="site or test scene name (hollowtree synth)")
-    points: PosInt = Field(1_000_000, description="aim at about this many points")
-    seed: int = Field(0, description="scanner seed")
+    points: PosInt = Field(DEFAULT_POINTS, description="aim at about this many points")
+    seed: int = Field(ScanParams.seed, description="scanner seed")
     out: str = Field("out/{site}-{points}.laz", description="where the scan is written; {site}, {points}, {seed} are filled in")
 
     @field_validator("site")

@@ -1,7 +1,7 @@
 """Labelled synthetic scans: parametric architectural elements, the paper's sites, and a
 virtual terrestrial laser scanner that ray-casts them (``hollowtree synth``)."""
 
-from hollowtree.scenes.mesh import TriMesh, concat_meshes
-from hollowtree.scenes.scene import Element, Scene, SceneBuilder
+from hollowtree.exports import lazy_exports
 
-__all__ = ["Element", "Scene", "SceneBuilder", "TriMesh", "concat_meshes"]
+# Imported on first use: ``hollowtree.scenes.scan_params`` stays light (no NumPy).
+__all__, __getattr__ = lazy_exports(__name__, {"mesh": "TriMesh concat_meshes", "scene": "Element Scene SceneBuilder"})

@@ -28,6 +28,7 @@ from embreex import mesh_construction, rtcore_scene
 
 from hollowtree.classes import NUM_CLASSES
 from hollowtree.errors import ConfigError
+from hollowtree.scenes.scan_params import ScanParams
 from hollowtree.scenes.scene import Scene
 
 __all__ = [
@@ -73,52 +74,6 @@ _COLOUR = np.array(
 )
 assert len(_REFLECTANCE) == NUM_CLASSES
 assert len(_COLOUR) == NUM_CLASSES
-
-
-@dataclass(frozen=True, kw_only=True)
-class ScanParams:
-    """Settings of one synthetic scan.
-
-    Parameters
-    ----------
-    step_deg : float
-        Angular step of the spherical ray grid, degrees (both azimuth and elevation).
-    n_stations : int or None
-        Use the first ``n_stations`` stations of the scene; None = all of them.
-    noise : float
-        Standard deviation of the range noise at 10 m, metres (default 2.5 mm, like a
-        survey-grade scanner). At range r it is ``noise * (0.5 + 0.5 * r / 10)``.
-    registration_error : float
-        Standard deviation of each station's registration translation, metres; the
-        rotation has standard deviation ``registration_error / 20`` radians per axis
-        (so about the same displacement 20 m from the station). 0 = perfect registration.
-    min_range, max_range : float
-        The scanner's blind zone and its reach, metres.
-    seed : int
-        Seeds the station headings, the noise and the registration error.
-    """
-
-    step_deg: float
-    n_stations: int | None = None
-    noise: float = 0.0025
-    registration_error: float = 0.0
-    min_range: float = 0.6
-    max_range: float = 300.0
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        if not (math.isfinite(self.step_deg) and 0.001 <= self.step_deg <= 10.0):
-            raise ConfigError(f"step must be between 0.001 and 10 degrees; got {self.step_deg}")
-        if self.n_stations is not None and self.n_stations <= 0:
-            raise ConfigError(f"stations must be a positive count; got {self.n_stations}")
-        if not (math.isfinite(self.noise) and self.noise >= 0):
-            raise ConfigError(f"noise must be a non-negative distance in metres; got {self.noise}")
-        if not (math.isfinite(self.registration_error) and self.registration_error >= 0):
-            raise ConfigError(
-                f"registration error must be a non-negative distance in metres; got {self.registration_error}"
-            )
-        if not 0 <= self.min_range < self.max_range:
-            raise ConfigError(f"need 0 <= min_range < max_range; got {self.min_range}, {self.max_range}")
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -399,8 +354,8 @@ def estimate_step(
     n_points: int,
     *,
     n_stations: int | None = None,
-    min_range: float = 0.6,
-    max_range: float = 300.0,
+    min_range: float = ScanParams.min_range,
+    max_range: float = ScanParams.max_range,
     caster: RayCaster | None = None,
 ) -> float:
     """Angular step (degrees) at which a scan of ``scene`` yields about ``n_points``.

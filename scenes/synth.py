@@ -31,6 +31,7 @@ import pyarrow.parquet as pq
 
 from hollowtree.classes import ELEMENT_CLASSES, NUM_CLASSES, ClassId
 from hollowtree.errors import ConfigError, InputFileError, OutputExistsError
+from hollowtree.scenes.scan_params import DEFAULT_POINTS
 from hollowtree.scenes.scanner import (
     RayCaster,
     ScanParams,
@@ -336,7 +337,7 @@ def synth(
     """Generate the labelled scan of ``site`` into ``out`` (the ``hollowtree synth`` job).
 
     Everything is validated before anything is written. With neither ``n_points`` nor
-    ``step_deg`` the scan aims at one million points.
+    ``step_deg`` the scan aims at ``DEFAULT_POINTS`` (one million).
 
     Raises
     ------
@@ -364,7 +365,7 @@ def synth(
     caster = RayCaster(scene)
     if step_deg is None:
         step_deg = estimate_step(
-            scene, 1_000_000 if n_points is None else n_points, n_stations=n_stations, caster=caster
+            scene, DEFAULT_POINTS if n_points is None else n_points, n_stations=n_stations, caster=caster
         )
     params = ScanParams(
         step_deg=step_deg,

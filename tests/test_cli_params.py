@@ -157,3 +157,59 @@ def test_the_kernels_defaults_are_the_workflows(stage):
     section, convert, _ = STAGES[stage]
     params = convert(section())
     assert type(params)() == params
+
+
+def _flags(command: str) -> dict:
+    sub = next(a for a in build_parser()._subparsers._group_actions if command in a.choices).choices[command]
+    return {a.dest: a for a in sub._actions}
+
+
+def test_the_synth_flags_are_the_scans_declaration():
+    """``hollowtree synth``'s flags and the workflow's ``input.synth`` say what
+    ``ScanParams`` declares (and the point count ``DEFAULT_POINTS``)."""
+    import inspect
+
+    from hollowtree.scenes.scan_params import DEFAULT_POINTS, ScanParams
+    from hollowtree.scenes.synth import synth
+
+    flags = _flags("synth")
+    declared = {s.name: s for s in specs(ScanParams)}
+    for key in ("seed", "noise", "registration_error"):
+        spec, flag = declared[key], flags[key]
+        assert flag.default is None, key
+        shown = f"{spec.default:,}" if isinstance(spec.default, int) else f"{spec.default:g}"
+        assert flag.help == f"{spec.rule.doc} (default {shown})", key
+        assert inspect.signature(synth).parameters[key].default == spec.default, key
+    assert flags["points"].help.endswith(f"(default {DEFAULT_POINTS:,})")
+    props = json_schema()["$defs"]["SynthInput"]["properties"]
+    assert (props["points"]["default"], props["seed"]["default"]) == (DEFAULT_POINTS, ScanParams.seed)
+
+
+def test_the_kernels_take_their_defaults_from_the_declaration():
+    """The tree's recursion, the split fit, the HollowNet data sets and training take their
+    defaults from the one declaration of each parameter."""
+    import dataclasses
+    import inspect
+
+    from hollowtree.hollownet.dataset import DatasetParams, labelled_samples
+    from hollowtree.hollownet.train import TrainConfig
+    from hollowtree.tree.build import build_tree
+    from hollowtree.tree.build_params import BuildParams
+    from hollowtree.tree.fit_split import proposal_samples
+
+    def defaults(func) -> dict:
+        return {k: p.default for k, p in inspect.signature(func).parameters.items()}
+
+    stage = {s.name: s for s in specs(TreeStageParams)}
+    for spec in specs(BuildParams):
+        assert defaults(build_tree)[spec.name] == spec.default, spec.name
+        assert (stage[spec.name].default, stage[spec.name].rule) == (spec.default, spec.rule), spec.name
+    assert defaults(proposal_samples)["max_depth"] == BuildParams().max_depth
+    data = {s.name: s for s in specs(DatasetParams)}
+    train = {s.name: s for s in specs(TrainConfig)}
+    for key in ("seed", "variants"):
+        assert (train[key].default, train[key].rule) == (data[key].default, data[key].rule), key
+    for key in ("seed", "variants", "grid_size", "canonical_yaw"):
+        assert defaults(labelled_samples)[key] == data[key].default, key
+    assert dataclasses.asdict(TrainConfig().datasets()[0]) == {
+        **dataclasses.asdict(DatasetParams()), "n_per_class": TrainConfig().n_train}

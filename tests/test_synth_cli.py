@@ -108,8 +108,8 @@ def test_unknown_site_lists_known(tmp_path, capsys):
     [
         (["--points", "0"], "positive"),
         (["--points", "-5"], "positive"),
-        (["--noise", "-0.1"], "non-negative"),
-        (["--registration-error", "-1"], "non-negative"),
+        (["--noise", "-0.1"], "The 'noise' parameter of scan must be a float in the range [0.0, inf)"),
+        (["--registration-error", "-1"], "'registration_error' parameter"),
         (["--step", "0"], "step"),
         (["--stations", "999"], "stations"),
         (["--crs", "EPSG:999999999"], "crs"),

@@ -12,64 +12,13 @@
 The per-segment Dask tasks and the CLI live in ``pipeline/``.
 """
 
-from hollowtree.tree.build import NodeTable, TreeResult, build_tree
-from hollowtree.tree.energy import (
-    Classifier,
-    EnergyModel,
-    e1,
-    e2,
-    e3,
-    e4,
-    e5,
-    energy_terms,
-    load_energy_model,
-)
-from hollowtree.tree.operators import (
-    TransportCurve,
-    fit_circle,
-    fit_ngon,
-    h,
-    p,
-    psi,
-    rho,
-    u,
-    v1,
-    v2,
-)
-from hollowtree.tree.sequences import Proposal, SequenceParams, propose, s1, s2, s3, storeys
-from hollowtree.tree.split import SplitModel, load_split_model, split_features
+from hollowtree.exports import lazy_exports
 
-__all__ = [
-    "Classifier",
-    "EnergyModel",
-    "NodeTable",
-    "Proposal",
-    "SequenceParams",
-    "SplitModel",
-    "TransportCurve",
-    "TreeResult",
-    "build_tree",
-    "e1",
-    "e2",
-    "e3",
-    "e4",
-    "e5",
-    "energy_terms",
-    "fit_circle",
-    "fit_ngon",
-    "h",
-    "load_energy_model",
-    "load_split_model",
-    "p",
-    "propose",
-    "psi",
-    "rho",
-    "s1",
-    "s2",
-    "s3",
-    "split_features",
-    "storeys",
-    "u",
-    "v1",
-    "v2",
-]
+# Imported on first use: ``hollowtree.tree.build_params`` stays light (no NumPy).
+__all__, __getattr__ = lazy_exports(__name__, {
+    "build": "NodeTable TreeResult build_tree",
+    "energy": "Classifier EnergyModel e1 e2 e3 e4 e5 energy_terms load_energy_model",
+    "operators": "TransportCurve fit_circle fit_ngon h p psi rho u v1 v2",
+    "sequences": "Proposal SequenceParams propose s1 s2 s3 storeys",
+    "split": "SplitModel load_split_model split_features",
+})

@@ -27,6 +27,7 @@ from scipy.spatial import cKDTree
 from hollowtree.arrays import FloatArray, IntArray
 from hollowtree.classes import ELEMENT_CLASSES, ClassId
 from hollowtree.columns import column_max, column_min, column_span
+from hollowtree.tree.build_params import BuildParams
 from hollowtree.tree.energy import Classifier, EnergyModel, energy_terms, load_energy_model
 from hollowtree.tree.operators import RngLike, h
 from hollowtree.tree.posts import posts
@@ -223,12 +224,12 @@ def build_tree(
     classifier: Classifier,
     *,
     model: EnergyModel | None = None,
-    max_depth: int = 3,
-    threshold: float | None = None,
+    max_depth: int = BuildParams.max_depth,
+    threshold: float | None = BuildParams.threshold,
     params: SequenceParams | None = None,
     rng: RngLike = None,
     split: SplitModel | None = None,
-    look_ahead: bool = True,
+    look_ahead: bool = BuildParams.look_ahead,
 ) -> TreeResult:
     """Build the hierarchical tree of one segment (Algorithm 1).
 

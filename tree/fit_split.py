@@ -33,6 +33,7 @@ import numpy.typing as npt
 from hollowtree.arrays import FloatArray, IntArray
 from hollowtree.columns import column_span
 from hollowtree.tree.build import _is_flat
+from hollowtree.tree.build_params import BuildParams
 from hollowtree.tree.energy import Classifier
 from hollowtree.tree.sequences import SequenceParams, propose
 from hollowtree.tree.split import FEATURE_NAMES, SplitModel, split_features
@@ -132,7 +133,7 @@ def proposal_samples(
     params: SequenceParams | None = None,
     n_seeds: int = 3,
     min_node: int = 2000,
-    max_depth: int = 3,
+    max_depth: int = BuildParams.max_depth,
 ) -> SplitSamples:
     """The proposals of one scene's element groups (module docstring).
 

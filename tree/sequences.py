@@ -31,6 +31,7 @@ import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 from hollowtree.arrays import FloatArray, IntArray
+from hollowtree.params import Params, param
 from hollowtree.primitives.dbscan import dbscan_labels
 from hollowtree.tree.operators import (
     Histogram,
@@ -80,60 +81,40 @@ BAND_LEVEL = 0.9
 
 
 @dataclass(frozen=True, kw_only=True)
-class SequenceParams:
-    """Settings shared by the three sequences.
+class SequenceParams(Params, owner="SequenceParams"):
+    """Settings shared by the three sequences, each declared once (``hollowtree.params``):
+    its default, range and meaning."""
 
-    Attributes
-    ----------
-    prominence : float
-        Peak prominence as a fraction of the histogram's range (:func:`~tree.operators.rho`).
-    sigma : float
-        Smoothing of the fine histogram, in fine bins.
-    bins_per_crossing : float
-        Limited bins per zero crossing of the derivative (:func:`~tree.operators.v2`).
-    min_points : int
-        Nodes with fewer points get no proposal.
-    min_child_fraction : float
-        A child holding less than this share of the node's points is merged into its
-        neighbour across the weaker cut (a peak in a sparse stretch is not a boundary).
-    residual_threshold : float or None
-        Circle/n-gon RANSAC inlier distance (default: 1 % of the footprint).
-    flat_ratio, flat_height : float
-        A node is flat, and :func:`tree.build.build_tree` does not split it, when its
-        height (1st to 99th percentile of z) is under ``max(flat_height, flat_ratio x
-        its larger horizontal extent)``: a ground or roof patch has no vertical structure
-        for S1 or S3 to cut, and S2 would only follow its point density.
-    cell : float
-        Edge of the occupancy cells of S2 and S3 (metres; :func:`occupancy_cut`). 0 = the
-        plain point count (the histogram follows the scan's density).
-    storeys : bool
-        Also propose a cut along the height from the same occupancy (:func:`storeys`).
-    bands : bool
-        A kept storeys split makes each solid band (the wall over a row of arches) a child
-        of its own, cut at both its ends (:data:`BAND_LEVEL`), instead of halving it.
-    gap : float
-        A stretch at least this long (metres) along the node's wall with (almost) nothing
-        in it separates two parts that do not touch: :func:`tree.build.build_tree` splits
-        the root there before anything else (:func:`gaps`). 0 = never.
-    part_gap : float
-        Parts of a node whose points come no closer than this (metres) are apart
-        (:func:`parts`); :func:`tree.build.build_tree` splits a root that nothing else
-        splits into them when HollowNet calls them different classes. 0 = never.
-    """
-
-    prominence: float = 0.05
-    sigma: float = 1.0
-    bins_per_crossing: float = 1.0
-    min_points: int = 30
-    min_child_fraction: float = 0.02
-    residual_threshold: float | None = None
-    flat_ratio: float = 0.05
-    flat_height: float = 0.5
-    cell: float = 0.1
-    storeys: bool = True
-    bands: bool = True
-    gap: float = 2.0
-    part_gap: float = 0.2
+    prominence: float = param(0.05, gt=0, doc="peak prominence as a fraction of the histogram's range "
+                                              "(:func:`~tree.operators.rho`)")
+    sigma: float = param(1.0, ge=0, doc="smoothing of the fine histogram, in fine bins")
+    bins_per_crossing: float = param(1.0, gt=0, doc="limited bins per zero crossing of the derivative "
+                                                    "(:func:`~tree.operators.v2`)")
+    min_points: int = param(30, ge=0, doc="nodes with fewer points get no proposal")
+    min_child_fraction: float = param(
+        0.02, ge=0, lt=1, doc="a child holding less than this share of the node's points is merged into its "
+                              "neighbour across the weaker cut (a peak in a sparse stretch is not a boundary)")
+    residual_threshold: float | None = param(
+        None, gt=0, doc="circle/n-gon RANSAC inlier distance; None = 1 % of the footprint")
+    flat_ratio: float = param(
+        0.05, ge=0, doc="a node is flat, and :func:`tree.build.build_tree` does not split it, when its height (1st "
+                        "to 99th percentile of z) is under ``max(flat_height, flat_ratio x its larger horizontal "
+                        "extent)``: a ground or roof patch has no vertical structure for S1 or S3 to cut, and S2 "
+                        "would only follow its point density")
+    flat_height: float = param(0.5, ge=0, doc="see ``flat_ratio`` (metres)")
+    cell: float = param(0.1, ge=0, doc="edge of the occupancy cells of S2 and S3 (metres; :func:`occupancy_cut`); "
+                                       "0 = the plain point count (the histogram follows the scan's density)")
+    storeys: bool = param(True, doc="also propose a cut along the height from the same occupancy (:func:`storeys`)")
+    bands: bool = param(True, doc="a kept storeys split makes each solid band (the wall over a row of arches) a "
+                                  "child of its own, cut at both its ends (:data:`BAND_LEVEL`), instead of halving it")
+    gap: float = param(2.0, ge=0, doc="a stretch at least this long (metres) along the node's wall with (almost) "
+                                      "nothing in it separates two parts that do not touch: "
+                                      ":func:`tree.build.build_tree` splits the root there before anything else "
+                                      "(:func:`gaps`); 0 = never")
+    part_gap: float = param(0.2, ge=0, doc="parts of a node whose points come no closer than this (metres) are "
+                                           "apart (:func:`parts`); :func:`tree.build.build_tree` splits a root that "
+                                           "nothing else splits into them when HollowNet calls them different "
+                                           "classes; 0 = never")
 
     def to_dict(self) -> dict[str, object]:
         return dict(self.__dict__)
