@@ -72,6 +72,15 @@ def open(store: str | Path) -> LabelledScan:  # noqa: A001  (hollowtree.open, as
     return LabelledScan(rs)
 
 
+def _label_array(name: str, doc: str) -> Any:
+    """A read-only property: the store's ``labels/<name>`` array, read on first use."""
+
+    def get(self: LabelledScan) -> np.ndarray:
+        return self._label(name)
+
+    return property(get, doc=doc)
+
+
 class LabelledScan:
     """A finished run store's labels, read on first use.
 
@@ -100,35 +109,17 @@ class LabelledScan:
             self._cache[name] = self._store.read_slice(f"labels/{name}")
         return self._cache[name]
 
-    @property
-    def class_id(self) -> np.ndarray:
-        """uint8 class per point (:data:`CLASS_NAMES` indexes it); 0 = not labelled."""
-        return self._label("class")
+    class_id = _label_array("class", "uint8 class per point (:data:`CLASS_NAMES` indexes it); 0 = not labelled.")
+    instance = _label_array("instance", "uint32 element instance per point, unique in the store; 0 = none.")
+    segment = _label_array("segment", "uint64 tree leaf per point (coarse segment << 20 | leaf node id); 0 = none.")
+    score = _label_array("score", "float32 classifier score of each point's class.")
+    primitive = _label_array("primitive",
+                             "uint8 coarse primitive per point (plane, cylinder, sphere, cone, torus); 0 = none.")
 
     @property
     def class_name(self) -> np.ndarray:
         """The class name of each point (ground, wall, roof, arch, dome, minaret, pillar, ...)."""
         return np.asarray(CLASS_NAMES, dtype=object)[self.class_id]
-
-    @property
-    def instance(self) -> np.ndarray:
-        """uint32 element instance per point, unique in the store; 0 = none."""
-        return self._label("instance")
-
-    @property
-    def segment(self) -> np.ndarray:
-        """uint64 tree leaf per point (coarse segment << 20 | leaf node id); 0 = none."""
-        return self._label("segment")
-
-    @property
-    def score(self) -> np.ndarray:
-        """float32 classifier score of each point's class."""
-        return self._label("score")
-
-    @property
-    def primitive(self) -> np.ndarray:
-        """uint8 coarse primitive per point (plane, cylinder, sphere, cone, torus); 0 = none."""
-        return self._label("primitive")
 
     def counts(self) -> dict[str, int]:
         """Points per class name, for the classes that occur."""

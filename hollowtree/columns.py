@@ -10,11 +10,20 @@ propagates alike, an empty array raises alike); only the sign of a zero extreme 
 differ where ``-0.0`` and ``0.0`` tie.
 
 Pure NumPy, on the ground floor (``hollowtree/`` itself): every package may import it.
+
+Examples
+--------
+>>> a = np.array([[3.0, -1.0], [2.0, 5.0]])
+>>> column_min(a).tolist(), column_max(a).tolist(), column_span(a).tolist()
+([2.0, -1.0], [3.0, 5.0], [1.0, 6.0])
+>>> column_max(np.array([[3, -1], [2, 5]])).tolist()  # the array's dtype
+[3, 5]
 """
 
 from __future__ import annotations
 
-from typing import TypeVar
+from collections.abc import Callable
+from typing import Any, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -24,34 +33,21 @@ __all__ = ["column_max", "column_min", "column_span"]
 _S = TypeVar("_S", bound=np.generic)
 
 
-def column_min(a: npt.NDArray[_S]) -> npt.NDArray[_S]:
-    """``a.min(axis=0)`` of a 2-D array, one column at a time.
+def _by_column(a: npt.NDArray[_S], reduce: Callable[[npt.NDArray[_S]], Any]) -> npt.NDArray[_S]:
+    """``reduce`` of each column of the 2-D array ``a`` in turn, as an array of ``a``'s dtype."""
+    return np.array([reduce(a[:, j]) for j in range(a.shape[1])], dtype=a.dtype)
 
-    Examples
-    --------
-    >>> column_min(np.array([[3.0, -1.0], [2.0, 5.0]])).tolist()
-    [2.0, -1.0]
-    """
-    return np.array([a[:, j].min() for j in range(a.shape[1])], dtype=a.dtype)
+
+def column_min(a: npt.NDArray[_S]) -> npt.NDArray[_S]:
+    """``a.min(axis=0)`` of a 2-D array, one column at a time."""
+    return _by_column(a, np.ndarray.min)
 
 
 def column_max(a: npt.NDArray[_S]) -> npt.NDArray[_S]:
-    """``a.max(axis=0)`` of a 2-D array, one column at a time.
-
-    Examples
-    --------
-    >>> column_max(np.array([[3, -1], [2, 5]])).tolist()
-    [3, 5]
-    """
-    return np.array([a[:, j].max() for j in range(a.shape[1])], dtype=a.dtype)
+    """``a.max(axis=0)`` of a 2-D array, one column at a time."""
+    return _by_column(a, np.ndarray.max)
 
 
 def column_span(a: npt.NDArray[_S]) -> npt.NDArray[_S]:
-    """``np.ptp(a, axis=0)`` (maximum minus minimum) of a 2-D array, one column at a time.
-
-    Examples
-    --------
-    >>> column_span(np.array([[3.0, -1.0], [2.0, 5.0]])).tolist()
-    [1.0, 6.0]
-    """
-    return np.array([a[:, j].max() - a[:, j].min() for j in range(a.shape[1])], dtype=a.dtype)
+    """``np.ptp(a, axis=0)`` (maximum minus minimum) of a 2-D array, one column at a time."""
+    return _by_column(a, lambda c: c.max() - c.min())

@@ -57,21 +57,15 @@ __all__ = [
 #: A proposal is good when its target (:func:`proposal_target`) reaches this.
 GOOD_TARGET = 0.5
 #: Training segments: (scene, element class of the segment's points, how parts are made).
-TRAINING_SEGMENTS: tuple[tuple[str, ClassId, str], ...] = (
-    ("minaret", ClassId.MINARET, "stages"),
-    ("octagonal_minaret", ClassId.MINARET, "stages"),
-    ("arcade", ClassId.ARCH, "instances"),
-    ("pointed_arcade", ClassId.ARCH, "instances"),
-    ("curved_arcade", ClassId.ARCH, "instances"),
-    ("dome", ClassId.DOME, "one"),
-    ("onion_dome", ClassId.DOME, "one"),
-    ("pointed_dome", ClassId.DOME, "one"),
-    ("chattri", ClassId.DOME, "one"),
+TRAINING_SEGMENTS: tuple[tuple[str, ClassId, str], ...] = tuple((scene, cls, how) for scenes, cls, how in (
+    ("minaret octagonal_minaret", ClassId.MINARET, "stages"),
+    ("arcade pointed_arcade curved_arcade", ClassId.ARCH, "instances"),
+    ("dome onion_dome pointed_dome chattri", ClassId.DOME, "one"),
     ("bastion", ClassId.MINARET, "one"),
     ("pillar", ClassId.PILLAR, "one"),
     ("portal", ClassId.ARCH, "one"),
     ("plane_wall", ClassId.WALL, "one"),
-)
+) for scene in scenes.split())
 
 
 def minaret_stage_cuts(
