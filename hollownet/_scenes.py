@@ -15,7 +15,7 @@ from collections.abc import Callable
 import numpy as np
 
 from hollowtree.classes import ClassId
-from hollowtree.scenes._builders import add_arcade
+from hollowtree.scenes._builders import EYE, add_arcade
 from hollowtree.scenes.elements import (
     ArcPath,
     StraightPath,
@@ -40,8 +40,6 @@ from hollowtree.scenes.scene import Scene, SceneBuilder
 from hollowtree.scenes.shapes import box, ellipsoid
 
 __all__ = ["RECIPES", "random_scene", "storeyed_arcades"]
-
-EYE = 1.6
 
 
 def _u(rng: np.random.Generator, lo: float, hi: float) -> float:

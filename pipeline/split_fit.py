@@ -94,7 +94,7 @@ def training_groups(i: int, work: Path) -> Path:
         return out
     recipe, scene, rng = _scene(i)
     laz = work / f"scene-{i}.laz"
-    write_scan(scene, laz, ScanParams(step_deg=float(rng.uniform(0.15, 0.3)), seed=i, noise=0.0025), workers=2)
+    write_scan(scene, laz, ScanParams(step_deg=float(rng.uniform(0.15, 0.3)), seed=i), workers=2)
     _groups_of_scan(laz, work, out, recipe, _synthetic_gt(laz))
     laz.unlink()
     sidecar_path(laz).unlink(missing_ok=True)

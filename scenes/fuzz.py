@@ -211,7 +211,7 @@ def _scan_scene(spec: FuzzSpec) -> dict[str, npt.NDArray[Any]]:
     except ConfigError:  # the stations see nothing: an empty scan is a valid result here
         return {"xyz": np.zeros((0, 3)), "gt_class": np.zeros(0, np.uint8), "gt_instance": np.zeros(0, np.uint32)}
     # at most about 3 M rays a station: a scene the stations barely see gets fewer points
-    params = ScanParams(step_deg=max(step, 0.15), noise=0.0025, seed=spec.seed,
+    params = ScanParams(step_deg=max(step, 0.15), seed=spec.seed,
                         registration_error=0.002 * (spec.seed % 3))
     chunks = list(scan(scene, params, caster=caster, workers=1))
     if not chunks:
