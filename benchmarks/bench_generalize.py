@@ -82,6 +82,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--split", default="test", choices=["train", "val", "test"])
     ap.add_argument("--sites", type=int, default=30)
     ap.add_argument("--family", choices=FAMILIES, default=None, help="only this family's seeds of the split")
+    ap.add_argument("--skip", type=int, default=0, metavar="K",
+                    help="leave out the split's first K seeds (test seeds already read: report on fresh ones)")
     ap.add_argument("--points", type=float, nargs=2, default=(5e5, 2e6), metavar=("MIN", "MAX"))
     ap.add_argument("--no-energy", action="store_true", help="skip the paper's energy path")
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
@@ -89,9 +91,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--work", type=Path, default=REPO / "out" / "generalize")
     ap.add_argument("--json", type=Path, default=None, help="default benchmarks/results/generalize-<split>.json")
     args = ap.parse_args(argv)
-    if args.sites < 1 or not 0 < args.points[0] <= args.points[1]:
-        ap.error("--sites must be positive and --points MIN MAX with 0 < MIN <= MAX")
-    seeds = split_seeds(args.split, args.sites, family=args.family)
+    if args.sites < 1 or args.skip < 0 or not 0 < args.points[0] <= args.points[1]:
+        ap.error("--sites must be positive, --skip at least 0 and --points MIN MAX with 0 < MIN <= MAX")
+    seeds = split_seeds(args.split, args.skip + args.sites, family=args.family)[args.skip:]
     args.work.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     scans = []

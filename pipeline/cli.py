@@ -64,7 +64,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _synth_description() -> str:
-    from hollowtree.scenes.sites import (  # scenes imports take ~0.3 s: only for this help
+    from hollowtree.scenes.sites import (  # scenes are slow to import: only for this help
         GENERATED,
         SITES,
         TEST_SCENES,
@@ -466,9 +466,12 @@ def _wave_line(w: Any) -> str:
     """One line of ``hollowtree status`` about a wave of units (:class:`pipeline.timing.Wave`)."""
     import statistics
 
+    from hollowtree.pipeline.timing import balance
+
     pts = sorted(w.points)
     med = statistics.median(pts) if pts else 0
-    spread = f" (largest {pts[-1] / med:.1f}x the median)" if med else ""
+    ratio = balance(pts)
+    spread = f" (largest {ratio:.1f}x the median)" if ratio else ""
     return (f"{w.name}: {len(w.wall)} units on {w.workers} workers; unit seconds total {sum(w.wall):.1f}, "
             f"median {statistics.median(w.wall):.2f}, max {max(w.wall):.2f}; CPU {sum(w.cpu):.1f} s; "
             f"points per unit median {med:,.0f}, max {pts[-1] if pts else 0:,}{spread}")

@@ -242,7 +242,7 @@ def coarse_tile(url: str, tile: int, cfg: dict[str, Any], n_blocks: int = 0) -> 
     }
     store.record(STAGE, str(tile), info)
     if from_tasks:  # the blocks' inputs and results are in the tile's arrays now
-        for group in ("blocks", "block_input", "block_of"):  # block_of: stores of before 2026-11-26
+        for group in ("blocks", "block_input", "block_of"):  # block_of: older stores
             store.delete(f"coarse/{group}/{tile}")
         store.delete_files(f"coarse/block_fits/{tile}")
     return info

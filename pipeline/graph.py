@@ -87,10 +87,9 @@ def tune_process_for_streaming() -> None:
 
 #: Dask settings of the local cluster's worker processes. Dask's nanny starts each worker
 #: with ``MALLOC_TRIM_THRESHOLD_=65536``: glibc then hands memory back to the kernel after
-#: nearly every large array and the next array's pages fault in zeroed again. A coarse
-#: block task of 2.1 M points took 22.3 s (7.9 s in the kernel) with it and 13.9 s
-#: (1.3 s) with glibc's own adaptive thresholds, peak 1,013 against 1,054 MB
-#: (docs/decisions/speed-and-memory.md, "Workers without Dask's trim threshold"). ``None``
+#: nearly every large array and the next array's pages fault in zeroed again, which makes
+#: coarse block tasks much slower at about the same peak (measured in
+#: docs/decisions/speed-and-memory.md, "Workers without Dask's trim threshold"). ``None``
 #: unsets it; a value in the environment still wins.
 _LOCAL_WORKER_CONFIG: dict[str, Any] = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
 

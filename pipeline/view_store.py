@@ -28,7 +28,7 @@ from hollowtree.tiling.store import CHUNK_POINTS, RunStore
 __all__ = ["ViewStore", "SEQUENCES", "PARTS_CACHE_BYTES", "LEAF_BITS", "CLASS_RGB"]
 
 #: ``labels/segment = coarse segment << LEAF_BITS | tree leaf`` (``pipeline.labels.LEAF_BITS``;
-#: not imported: pipeline.labels loads the whole pipeline, 2 s before the server could listen).
+#: not imported: pipeline.labels loads the whole pipeline and delays the server's start).
 LEAF_BITS = 20
 #: The class colours of ``pipeline.export.CLASS_COLOURS`` (the PNG views), RGB 0-255; the
 #: tests check that they agree.
