@@ -21,7 +21,11 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["WAVES", "Wave", "lpt_makespan", "predict_seconds", "unit_points", "waves"]
+__all__ = ["UNIT_BALANCE", "WAVES", "Wave", "balance", "lpt_makespan", "predict_seconds", "unit_points", "waves"]
+
+#: The most points a stage's unit should hold, as a multiple of the median unit of its
+#: wave (issue 44): the coarse stage's blocks and the tree's batches are sized for it.
+UNIT_BALANCE = 3.0
 
 #: ``(stage, wave, record stage)`` in the order a run makes them. The coarse stage's
 #: ``coarse`` records are two waves: a tile segmented whole (``n_blocks`` 1) runs beside
@@ -88,6 +92,20 @@ def waves(records: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> list[Wave]:
                             tuple(float(u.get("cpu_s", 0.0)) for u in units),
                             tuple(unit_points(u) for u in units), len({u.get("worker") for u in units})))
     return out
+
+
+def balance(points: Sequence[int]) -> float | None:
+    """The largest of a wave's unit sizes over their median (None when the median is 0).
+
+    >>> balance([10, 20, 30, 90]), balance([0, 0, 5]), balance([])
+    (3.6, None, None)
+    """
+    pts = sorted(points)
+    if not pts:
+        return None
+    n = len(pts)
+    med = pts[n // 2] if n % 2 else (pts[n // 2 - 1] + pts[n // 2]) / 2
+    return pts[-1] / med if med else None
 
 
 def lpt_makespan(durations: Sequence[float], workers: int) -> float:
