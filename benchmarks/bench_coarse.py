@@ -35,7 +35,9 @@ normals + RANSAC + DBSCAN time over CGAL normals + RANSAC time <= 1.0 at equal o
 recall.
 
 Run: ``python benchmarks/bench_coarse.py [--sites derawar wazir_khan]
-[--scan-points 1800000] [--crop-points 1000000]``.
+[--scan-points 1800000] [--crop-points 1000000] [--repeats N [--only-repeats]] [--json PATH]``
+(default ``benchmarks/results/coarse.json``, with ``--only-repeats`` ``coarse-repeats.json``;
+``once`` per site: seconds and recall of every method, ``repeats``: the means and per-run recalls).
 """
 
 from __future__ import annotations
@@ -55,6 +57,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _results import RESULTS, write
 
 REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
@@ -388,7 +391,7 @@ def bench_site(site: str, args: argparse.Namespace, tmp: Path) -> dict:
           f"{info['extent']} m; synth {info['synth_s']:.1f} s)", flush=True)
     lines: list[str] = []
     notes: list[str] = []
-    summary: dict = {"site": site, "info": info}
+    summary: dict = {"site": site, "info": info, "once": []}
     if args.only_repeats:
         from hollowtree.primitives.dbscan import default_eps
 
@@ -411,6 +414,7 @@ def bench_site(site: str, args: argparse.Namespace, tmp: Path) -> dict:
                          prim=ours["ransac_s"], dbscan=None, n_shapes=ours["n_shapes"]))
         summary["ours"] = {k: v for k, v in ours.items() if k not in ("labels", "segments")}
         summary["ours"]["recall"] = q["recall"]
+        summary["once"].append({"method": "ours: kernels", "s": ours["total_s"], "recall": q["recall"]})
         notes.append(f"ours: {ours['kinds']}, {ours['n_invalid']} invalid normals, DBSCAN eps "
                      f"{ours['eps']:.3f} m (default_eps {ours['eps_s']:.2f} s, in the DBSCAN column), "
                      f"RANSAC stop: {ours['stop']}")
@@ -420,6 +424,7 @@ def bench_site(site: str, args: argparse.Namespace, tmp: Path) -> dict:
         lines.append(row("ours, the stage's tile kernel (+ free segments, sparse pass; one timing)", q_full,
                          normals=None, prim=full["total_s"], dbscan=None, n_shapes=full["n_segments"]))
         summary["ours_tile_kernel"] = {"total_s": full["total_s"], "recall": q_full["recall"]}
+        summary["once"].append({"method": "ours: tile kernel", "s": full["total_s"], "recall": q_full["recall"]})
         print(f"  ours tile kernel done: {full['total_s']:.1f} s", flush=True)
     except Exception as exc:  # noqa: BLE001
         notes.append(f"ours FAILED: {type(exc).__name__}: {exc}")
@@ -459,18 +464,19 @@ def bench_site(site: str, args: argparse.Namespace, tmp: Path) -> dict:
                 key = "cgal" if i == 0 else "cgal_tuned"
                 summary[key] = dict(normals_s=nrm, ransac_s=run["ransac_s"], recall=q["recall"],
                                     recall_split=q2["recall"], kinds=run["kinds"])
+                summary["once"].append({"method": names[i], "s": nrm + run["ransac_s"], "recall": q["recall"]})
                 notes.append(f"{names[i]}: {run['kinds']}; bindings I/O (PLY in {res['io_s']:.1f} s, "
                              f"labels out {run['io_s']:.1f} s) not counted")
             print(f"  CGAL done: normals {nrm:.1f} s", flush=True)
 
     # plane-loop peers
     peers = []
-    if not args.no_pyransac:
-        peers.append(("pyransac3d", f"pyransac3d plane loop ({args.pyransac_iters} it/plane)", run_pyransac,
-                      args.pyransac_iters))
     if not args.no_open3d:
         peers.append(("open3d", f"Open3D segment_plane loop ({args.open3d_iters} it/plane)", run_open3d,
                       args.open3d_iters))
+    if not args.no_pyransac:
+        peers.append(("pyransac3d", f"pyransac3d plane loop ({args.pyransac_iters} it/plane)", run_pyransac,
+                      args.pyransac_iters))
     for key, label, run, iters in peers:
         name = label.split(" ")[0]
         try:
@@ -491,7 +497,9 @@ def bench_site(site: str, args: argparse.Namespace, tmp: Path) -> dict:
         lines.append(row(f"{name} + our DBSCAN split", q2, normals=None, prim=pr["ransac_s"], dbscan=t_split,
                          n_shapes=pr["n_shapes"]))
         notes.append(f"{name}: {pr['n_shapes']} planes, stop: {pr['stop']}")
-        summary[key] = dict(ransac_s=pr["ransac_s"], recall=q["recall"], recall_split=q2["recall"])
+        summary[key] = dict(ransac_s=pr["ransac_s"], recall=q["recall"], recall_split=q2["recall"], split_s=t_split)
+        summary["once"] += [{"method": f"{name} loop", "s": pr["ransac_s"], "recall": q["recall"]},
+                            {"method": f"{name} + DBSCAN", "s": pr["ransac_s"] + t_split, "recall": q2["recall"]}]
         print(f"  {name} done: {pr['ransac_s']:.1f} s", flush=True)
 
     n_gt = summary.get("n_gt", {})
@@ -544,7 +552,10 @@ def repeat_tile_kernel_vs_cgal_tuned(xyz: np.ndarray, gt_cls: np.ndarray, gt_ins
         print(f"| {name} | {len(got)} | {s:.2f} | **{r:.3f}** | {per_run} | {per_round} |")
     if len(means) == 2:
         (so, ro), (sc, rc) = means.values()
-        summary["repeats"] = {"ours_s": so, "ours_recall": ro, "cgal_tuned_s": sc, "cgal_tuned_recall": rc}
+        summary["repeats"] = {"ours_s": so, "ours_recall": ro, "cgal_tuned_s": sc, "cgal_tuned_recall": rc,
+                              "ours_recalls": [g[1]["recall"] for g in rows["ours, the stage's tile kernel"]],
+                              "cgal_tuned_recalls": [g[1]["recall"] for g in rows["CGAL tuned"]],
+                              "ratio_of_means": so / sc}
         print(f"\nmean ratio (ours tile kernel) / (CGAL tuned normals + RANSAC) = {so:.2f} / {sc:.2f} = "
               f"**{so / sc:.2f}** at mean recall {ro:.3f} vs {rc:.3f}", flush=True)
 
@@ -571,6 +582,9 @@ def main() -> None:
     ap.add_argument("--pyransac-iters", type=int, default=200)
     ap.add_argument("--pyransac-max-planes", type=int, default=30)
     ap.add_argument("--pyransac-time-cap", type=float, default=90.0)
+    ap.add_argument("--json", type=Path, default=None,
+                    help="write the figures here (default benchmarks/results/coarse.json; with --only-repeats "
+                         "coarse-repeats.json)")
     # internal: the CGAL child process
     ap.add_argument("--cgal-worker", nargs=2, metavar=("XYZ_NPY", "OUT_JSON"), help=argparse.SUPPRESS)
     ap.add_argument("--cgal-k", type=int, default=16, help=argparse.SUPPRESS)
@@ -595,6 +609,8 @@ def main() -> None:
     if ours:
         print(f"\noverall ratio over {len(ours)} site(s): {sum(ours):.1f} s / {sum(cgal):.1f} s = "
               f"**{sum(ours) / sum(cgal):.2f}**")
+    name = "coarse-repeats" if args.only_repeats else "coarse"
+    write(args.json or RESULTS / f"{name}.json", "bench_coarse", args, sites=summaries)
     print(f"benchmark wall time {time.perf_counter() - t0:.0f} s")
 
 

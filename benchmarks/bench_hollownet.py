@@ -8,18 +8,22 @@
 - accuracy of the shipped weights on a freshly generated held-out set (a seed never
   used in training; the paper: 99.03 % on its 7 classes).
 
-Run: ``python benchmarks/bench_hollownet.py [--per-class 50] [--seed 777] [--json FILE]``.
+Run: ``python benchmarks/bench_hollownet.py [--per-class 50] [--seed 777] [--json FILE]``
+(default ``benchmarks/results/hollownet.json``; another machine's run as ``hollownet-<machine>.json``
+adds a column to docs/benchmarks.md; ``isa`` names the CPU's vector units, ``bf16_native`` whether it
+computes bfloat16 itself or emulates it).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import time
+from pathlib import Path
 
 import numpy as np
 import torch
+from _results import add_json, write
 
 from hollowtree.classes import ClassId
 from hollowtree.hollownet.dataset import DatasetParams, generate_samples
@@ -51,14 +55,27 @@ def dome_segment(n: int = 100_000) -> np.ndarray:
     return dome[rng.choice(len(dome), n, replace=len(dome) < n)] + [512_000.0, 3_400_000.0, 200.0]
 
 
+def cpu_flags() -> tuple[list[str], bool]:
+    """The vector units the CPU reports (``/proc/cpuinfo``) and whether it has bfloat16 arithmetic."""
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return [], False
+    flags = set(next((ln.split(":", 1)[1].split() for ln in text.splitlines() if ln.startswith("flags")), []))
+    isa = ["AVX-512"] if "avx512f" in flags else ["AVX2"] if "avx2" in flags else []
+    isa += ["AMX"] if "amx_tile" in flags else []
+    return isa, bool(flags & {"avx512_bf16", "amx_bf16"})
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--per-class", type=int, default=50, help="held-out samples per class (default 50)")
     ap.add_argument("--seed", type=int, default=777, help="held-out seed (default 777; training used 0)")
     ap.add_argument("--repeat", type=int, default=20)
-    ap.add_argument("--json", help="also write the figures to this JSON file")
+    add_json(ap, "hollownet")
     args = ap.parse_args()
-    res: dict[str, object] = {"cpu_count": os.cpu_count(), "torch": torch.__version__}
+    isa, bf16 = cpu_flags()
+    res: dict[str, object] = {"cpu_count": os.cpu_count(), "torch": torch.__version__, "isa": isa, "bf16_native": bf16}
 
     seg = dome_segment()
     for cy in (False, True):
@@ -103,9 +120,7 @@ def main() -> None:
     print(f"| held-out accuracy ({len(truth)} segments, seed {args.seed}) | "
           f"{100 * res['heldout_accuracy_float32']:.2f} % (bfloat16: "
           f"{100 * res['heldout_accuracy_bfloat16']:.2f} %) | 99.03 % |")
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(res, f, indent=2)
+    write(args.json, "bench_hollownet", args, **res)
 
 
 if __name__ == "__main__":

@@ -18,7 +18,7 @@ start, importing what ``hollowtree ingest`` imports, and a whole ingest of a 1 0
 file (imports, numba's start, the local cluster, planning, one map and one reduce task).
 
 Run: ``python benchmarks/bench_ingest.py [--sizes 10000000 100000000] [--site S]
-[--repeats N] [--processes]``.
+[--repeats N] [--processes] [--json PATH]`` (default ``benchmarks/results/ingest.json``).
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ import time
 from pathlib import Path
 
 import laspy
+from _results import add_json, write
 
 
 def _cpu() -> float:
@@ -96,6 +97,7 @@ def main() -> None:
     ap.add_argument("--las-up-to", type=int, default=20_000_000)
     ap.add_argument("--repeats", type=int, default=1, help="raw read + ingest pairs per file (medians)")
     ap.add_argument("--processes", action="store_true", help="ingest on a local cluster of processes")
+    add_json(ap, "ingest")
     args = ap.parse_args()
     repo = Path(__file__).resolve().parents[1]
     env = dict(os.environ, PYTHONPATH=str(repo))
@@ -105,7 +107,7 @@ def main() -> None:
     print(f"machine: {os.cpu_count()} cores, "
           f"{os.sysconf('SC_PAGE_SIZE') * os.sysconf('SC_PHYS_PAGES') / 2**30:.0f} GiB; "
           f"load average {os.getloadavg()[0]:.2f}; workers: {'processes' if args.processes else 'threads'}")
-    peaks = {}
+    peaks, rows = {}, []
     with tempfile.TemporaryDirectory(dir=os.environ.get("BENCH_TMP")) as tmp:
         fixed_cost(Path(tmp), env, args.processes)
         print(f"{'file':>22} {'points':>12} {'raw Mpts/s':>10} {'ingest s':>9} {'ingest Mpts/s':>13} "
@@ -134,15 +136,21 @@ def main() -> None:
                 if args.repeats > 1:
                     detail = (f"   (raw {' '.join(f'{r / 1e6:.2f}' for r in raws)}; "
                               f"ingest s {' '.join(f'{t:.1f}' for t in times)})")
+                rows.append({"file": suffix[1:].upper(), "points": res.n_points, "raw_m_points_per_s": raw / 1e6,
+                             "ingest_s": seconds, "ingest_m_points_per_s": rate / 1e6, "ingest_over_raw": rate / raw,
+                             "peak_mb": peak, "raw_cpu_s": raw_cpu, "ingest_cpu_s": cpu})
                 print(f"{path.name:>22} {res.n_points:>12,} {raw / 1e6:>10.2f} {seconds:>9.1f} "
                       f"{rate / 1e6:>13.2f} {rate / raw:>6.2f} {peak:>8.0f} {raw_cpu:>9.1f} {cpu:>12.1f} "
                       f"{raw_cpu / cpu:>9.2f}{detail}", flush=True)
                 path.unlink()
                 path.with_name(path.stem + ".elements.parquet").unlink()
     laz = sorted((n, p) for (n, s), p in peaks.items() if s == ".laz")
+    ratios = {}
     if len(laz) > 1:
+        ratios["peak_laz_largest_over_smallest"] = laz[-1][1] / laz[0][1]
         print(f"peak memory ratio LAZ {laz[-1][0] / 1e6:.0f} M / {laz[0][0] / 1e6:.0f} M points: "
-              f"{laz[-1][1] / laz[0][1]:.2f}")
+              f"{ratios['peak_laz_largest_over_smallest']:.2f}")
+    write(args.json, "bench_ingest", args, rows=rows, ratios=ratios)
 
 
 if __name__ == "__main__":

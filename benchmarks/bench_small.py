@@ -10,14 +10,14 @@ over in process (above 1: in process is faster). The ratios choose
 ``../shared/data/external`` (when it is there) and the demo's 1 M points are the
 targets of issue 44 (under 8 s and 45 s on an idle 2-core machine).
 
-Run: ``python benchmarks/bench_small.py [--sizes 1e5 3e5 1e6 2e6 4e6] [--json FILE]``.
+Run: ``python benchmarks/bench_small.py [--sizes 1e5 3e5 1e6 2e6 4e6] [--json FILE]`` (default
+``benchmarks/results/small.json``).
 Scans are synthetic Wazir Khan scans made once in ``out/`` (not timed).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import shutil
 import subprocess
@@ -25,6 +25,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+from _results import add_json, write
 
 REPO = Path(__file__).resolve().parents[1]
 SIMPLE = REPO.parent / "shared" / "data" / "external" / "laspy" / "simple.laz"
@@ -50,7 +52,7 @@ def run_once(scan: Path, below: int, work: Path) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", nargs="+", type=float, default=[1e5, 3e5, 1e6, 2e6, 4e6])
-    ap.add_argument("--json", type=Path, default=None)
+    add_json(ap, "small")
     args = ap.parse_args()
     sys.path.insert(0, str(REPO))
     from hollowtree.scenes.synth import synth
@@ -73,8 +75,7 @@ def main() -> None:
                          "cluster_over_in_process": cluster / inproc})
             print(f"{scan.name:<28}{n:>12,} points: cluster {cluster:6.1f} s, in process {inproc:6.1f} s, "
                   f"ratio {cluster / inproc:.2f}", flush=True)
-    if args.json:
-        args.json.write_text(json.dumps({"cores": os.cpu_count(), "rows": rows}, indent=1))
+    write(args.json, "bench_small", args, rows=rows)
 
 
 if __name__ == "__main__":

@@ -15,7 +15,7 @@ made in a temporary folder), every point a neighbour, a seeded 30 % of the rows 
 Derawar), spacing = ``default_eps / 3`` and factor 2 (the stage's defaults).
 
 Run: ``python benchmarks/bench_sparse_points.py [--sites wazir_khan derawar]
-[--points 1000000] [--repeats 3]``.
+[--points 1000000] [--repeats 3] [--json PATH]`` (default ``benchmarks/results/sparse-points.json``).
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _results import add_json, write
 
 REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
@@ -50,6 +51,7 @@ def main() -> None:
     ap.add_argument("--sites", nargs="+", default=["wazir_khan", "derawar"])
     ap.add_argument("--points", type=int, default=1_000_000)
     ap.add_argument("--repeats", type=int, default=3)
+    add_json(ap, "sparse-points")
     args = ap.parse_args()
 
     import laspy
@@ -60,6 +62,7 @@ def main() -> None:
     print(f"machine: {os.cpu_count()} cores; {args.repeats} interleaved repeats per site")
     print("| site | points | sparse rows | reference s (median) | sparse_points s (median) | ratio | equal |")
     print("| --- | ---: | ---: | ---: | ---: | ---: | --- |")
+    rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for site in args.sites:
             path = Path(tmp) / f"{site}.laz"
@@ -79,8 +82,11 @@ def main() -> None:
                 t_new.append(time.perf_counter() - t0)
             equal = bool(np.array_equal(want[0], got[0]) and want[1] == got[1])
             r, n = float(np.median(t_ref)), float(np.median(t_new))
+            rows.append({"site": site, "points": len(xyz), "sparse_rows": len(got[0]), "before_s": r, "after_s": n,
+                         "ratio": n / r, "equal": equal})
             print(f"| {site} | {len(xyz):,} | {len(got[0]):,} | {r:.3f} | {n:.3f} | {n / r:.2f} | {equal} |",
                   flush=True)
+    write(args.json, "bench_sparse_points", args, rows=rows)
 
 
 if __name__ == "__main__":

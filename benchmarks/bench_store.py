@@ -7,7 +7,8 @@ rows, the same for both ways. The requests are those the server answered (one li
 log each). The moto server runs on this machine, so its time per request is far below a
 real object store's (tens of milliseconds): the request count is the figure that carries.
 
-Run: ``python benchmarks/bench_store.py [--units 24] [--rows 20000]``. Needs the dev
+Run: ``python benchmarks/bench_store.py [--units 24] [--rows 20000] [--json PATH]`` (default
+``benchmarks/results/store.json``). Needs the dev
 dependencies ``moto[server]`` and ``s3fs``.
 """
 
@@ -22,6 +23,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _results import add_json
+from _results import write as write_json
 
 NAMES = ("class", "segment", "instance", "primitive", "leaf", "node", "group", "score")
 
@@ -30,6 +33,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--units", type=int, default=24)
     ap.add_argument("--rows", type=int, default=20_000)
+    add_json(ap, "store")
     args = ap.parse_args()
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from hollowtree.tiling.store import _COMPRESSOR, CHUNK_POINTS, RunStore
@@ -75,6 +79,12 @@ def main() -> None:
         print(f"{where:13s} {way:22s} {count} {seconds:7.2f}")
     (_, _, n0, s0), (_, _, n1, s1), (_, _, _, l0), (_, _, _, l1) = rows
     print(f"write_unit / zarr: S3 requests {n1 / n0:.2f}, S3 time {s1 / s0:.2f}, local time {l1 / l0:.2f}")
+    arrays = args.units * len(NAMES)
+    s3 = lambda where, v: v if where == "moto S3" else None  # noqa: E731
+    write_json(args.json, "bench_store", args,
+               rows=[{"store": where, "way": way, "requests": s3(where, n), "per_array": s3(where, n / arrays),
+                      "s": seconds} for where, way, n, seconds in rows],
+               ratios={"s3_requests": n1 / n0, "s3_time": s1 / s0, "local_time": l1 / l0})
 
 
 if __name__ == "__main__":

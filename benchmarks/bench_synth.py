@@ -3,7 +3,8 @@
 Each size runs in its own process (so peak memory is that run's own) and the script
 prints points per second and peak resident memory per size, then the ratios that matter:
 peak memory of the largest over the smallest scan (flat = about 1) and throughput of the
-largest over the smallest. Run: ``python benchmarks/bench_synth.py [--site S] [--sizes ...]``.
+largest over the smallest. Run: ``python benchmarks/bench_synth.py [--site S] [--sizes ...]
+[--json PATH]`` (default ``benchmarks/results/synth.json``).
 """
 
 from __future__ import annotations
@@ -15,6 +16,8 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+
+from _results import add_json, write
 
 CHILD = r"""
 import json, resource, sys, time
@@ -35,6 +38,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--site", default="wazir_khan")
     ap.add_argument("--sizes", type=int, nargs="+", default=[1_000_000, 10_000_000, 100_000_000])
+    add_json(ap, "synth")
     args = ap.parse_args()
     repo = Path(__file__).resolve().parents[1]
     env = dict(os.environ, PYTHONPATH=str(repo))
@@ -48,22 +52,25 @@ def main() -> None:
             res = subprocess.run([sys.executable, "-c", CHILD, args.site, str(n), str(out)],
                                  env=env, capture_output=True, text=True, check=True)
             row = json.loads(res.stdout.strip().splitlines()[-1])
+            row |= {"m_points_per_s": row["points"] / row["seconds"] / 1e6,
+                    "m_rays_per_s": row["rays"] / row["seconds"] / 1e6, "laz_mb": row["bytes"] / 1e6}
             rows.append(row)
-            print(f"{row['points']:>12,} {row['seconds']:>8.1f} "
-                  f"{row['points'] / row['seconds'] / 1e6:>8.2f} "
-                  f"{row['rays'] / row['seconds'] / 1e6:>8.2f} {row['peak_rss_mb']:>8.0f} "
-                  f"{row['bytes'] / 1e6:>10.1f}", flush=True)
+            print(f"{row['points']:>12,} {row['seconds']:>8.1f} {row['m_points_per_s']:>8.2f} "
+                  f"{row['m_rays_per_s']:>8.2f} {row['peak_rss_mb']:>8.0f} {row['laz_mb']:>10.1f}", flush=True)
             out.unlink()
     small, large = rows[0], rows[-1]
-    print(f"peak memory ratio (largest / smallest): {large['peak_rss_mb'] / small['peak_rss_mb']:.2f}")
+    ratios = {"peak_largest_over_smallest": large["peak_rss_mb"] / small["peak_rss_mb"],
+              "throughput_largest_over_smallest": large["m_points_per_s"] / small["m_points_per_s"]}
+    print(f"peak memory ratio (largest / smallest): {ratios['peak_largest_over_smallest']:.2f}")
     if len(rows) > 2:
         prev = rows[-2]
+        ratios["peak_largest_over_previous"] = large["peak_rss_mb"] / prev["peak_rss_mb"]
         print(f"peak memory ratio ({large['points'] / 1e6:.0f} M / {prev['points'] / 1e6:.0f} M points): "
-              f"{large['peak_rss_mb'] / prev['peak_rss_mb']:.2f}")
-    rate = lambda r: r["points"] / r["seconds"]  # noqa: E731
-    print(f"throughput ratio (largest / smallest): {rate(large) / rate(small):.2f}")
-    print(f"largest run: {rate(large) / 1e6:.2f} M points/s "
-          f"({'meets' if rate(large) >= 1e6 else 'misses'} the 1 M points/s target)")
+              f"{ratios['peak_largest_over_previous']:.2f}")
+    print(f"throughput ratio (largest / smallest): {ratios['throughput_largest_over_smallest']:.2f}")
+    print(f"largest run: {large['m_points_per_s']:.2f} M points/s "
+          f"({'meets' if large['m_points_per_s'] >= 1 else 'misses'} the 1 M points/s target)")
+    write(args.json, "bench_synth", args, rows=rows, ratios=ratios)
 
 
 if __name__ == "__main__":

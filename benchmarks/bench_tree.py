@@ -37,13 +37,13 @@ time / target (below 1 meets it). The machine has 2 shared cores: compare ratios
 in one run.
 
 Run: ``python benchmarks/bench_tree.py [--points 100000] [--repeats 7] [--tree-repeats 3]
-[--hollownet-weights PATH] [--json OUT]``.
+[--hollownet-weights PATH] [--json OUT]`` (default ``benchmarks/results/tree.json``: seconds per
+segment and step, per tree its row of the whole-tree table).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import sys
@@ -51,6 +51,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _results import add_json, write
 
 REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
@@ -164,7 +165,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--tree-repeats", type=int, default=3)
     ap.add_argument("--hollownet-weights", type=Path, default=None,
                     help="also time the tree with HollowNet loaded from this file (timing only)")
-    ap.add_argument("--json", type=Path, default=None, help="also write the figures here")
+    add_json(ap, "tree")
     args = ap.parse_args(argv)
 
     report: dict = {"points": args.points, "cpus": len(os.sched_getaffinity(0)), "segments": {}, "trees": {}}
@@ -195,8 +196,8 @@ def main(argv: list[str] | None = None) -> dict:
     clfs: list[tuple[str, object, object]] = [("stand-in (tests), energy", StandInClassifier(xyz, gcls), None)]
     if HOLLOWNET_WEIGHTS.is_file():
         from hollowtree.hollownet.predict import Classifier
-        clfs.append(("HollowNet (CPU), energy", Classifier.get(), None))
-        clfs.append(("HollowNet (CPU), split model (default)", Classifier.get(), load_split_model()))
+        clfs.append(("HollowNet, CPU, energy", Classifier.get(), None))
+        clfs.append(("HollowNet, CPU, split model (default)", Classifier.get(), load_split_model()))
     else:
         report["trees"]["HollowNet"] = f"skipped: {HOLLOWNET_WEIGHTS.relative_to(REPO)} does not exist"
     if args.hollownet_weights is not None:
@@ -212,8 +213,7 @@ def main(argv: list[str] | None = None) -> dict:
     if not HOLLOWNET_WEIGHTS.is_file():
         print(f"HollowNet: skipped, {HOLLOWNET_WEIGHTS.relative_to(REPO)} does not exist "
               "(not trained yet); the tree time above uses the stand-in classifier only.")
-    if args.json:
-        args.json.write_text(json.dumps(report, indent=1) + "\n")
+    write(args.json, "bench_tree", args, **report)
     return report
 
 

@@ -6,7 +6,8 @@ the peak of the largest single process and the peak of their sum, per stage line
 run prints it. The synthetic input of the workflow is made first (not timed), so the
 figures are those of the pipeline.
 
-Run: ``python benchmarks/bench_workflow.py workflows/laptop.yaml [--set key=value ...]``.
+Run: ``python benchmarks/bench_workflow.py workflows/laptop.yaml [--set key=value ...] [--json PATH]``
+(default ``benchmarks/results/workflow.json``: per stage the time of its last line and the peaks so far).
 Target of ``workflows/laptop.yaml`` (issue 7): one downsampled tile of a 20 M-point
 synthetic site within 4 GiB peak memory.
 """
@@ -24,6 +25,10 @@ from pathlib import Path
 
 import psutil
 from _procs import tree_rss
+from _results import add_json, write
+
+#: The lines of ``hollowtree run`` that end a stage (the last of each is kept in the JSON).
+STAGES = ("ingest", "coarse", "tree", "labels", "outputs")
 
 
 def main() -> None:
@@ -31,6 +36,7 @@ def main() -> None:
     ap.add_argument("workflow", type=Path)
     ap.add_argument("--set", dest="overrides", action="append", default=[])
     ap.add_argument("--keep-store", action="store_true", help="do not delete the store first (measure a resume)")
+    add_json(ap, "workflow")
     args = ap.parse_args()
     repo = Path(__file__).resolve().parents[1]
     sys.path.insert(0, str(repo))
@@ -81,6 +87,12 @@ def main() -> None:
         print(f"{name[:13]:<14}{t:>8.1f}{m / 2**20:>17.0f}{s / 2**20:>13.0f}")
     print(f"exit {child.returncode}; wall {wall:.1f} s; peak single process {peak['max'] / 2**20:.0f} MB; "
           f"peak sum over processes {peak['sum'] / 2**20:.0f} MB ({peak['sum'] / 2**30:.2f} GiB)")
+    outputs = ", ".join(Path(str(o)).suffix[1:].upper() or "Parquet" for o in
+                        (wf.outputs.las, wf.outputs.parquet, wf.outputs.png) if o)
+    write(args.json, "bench_workflow", args, exit=child.returncode, wall_s=wall, outputs=outputs,
+          rows=list({name: {"line": name, "t_s": t, "peak_process_mb": m / 2**20, "peak_sum_mb": s / 2**20}
+                     for name, t, m, s in stage_peaks if name in STAGES}.values()),
+          peak_process_mb=peak["max"] / 2**20, peak_sum_gib=peak["sum"] / 2**30)
 
 
 if __name__ == "__main__":

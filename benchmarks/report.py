@@ -206,6 +206,187 @@ def fuzz() -> str:
     return "\n".join(out)
 
 
+def _size(n: int) -> str:
+    """A point count in round words: 100 M, 300 k."""
+    return f"{n / 1e6:.0f} M" if n >= 1e6 else f"{n / 1e3:.0f} k"
+
+
+def _cpu(d: dict) -> str:
+    """A JSON result's CPU in a few words: "Intel Xeon", "AMD EPYC Zen 3"."""
+    name = re.sub(r"\((R|TM)\)|\bProcessor\b|\bCPU\b.*", "", d.get("cpu") or "")
+    return " ".join(name.split()) or "unknown CPU"
+
+
+def synth() -> str:
+    """``bench_synth.py``: per size wall, throughput and peak memory; the last size's memory ratio."""
+    d = _load("synth.json")
+    rows = d["rows"]
+    out = ["| points | wall s | M points/s | M rays/s | peak RSS MB | LAZ MB |", "| ---: | ---: | ---: | ---: | ---: | ---: |"]
+    for i, r in enumerate(rows):
+        rate = f"{r['m_points_per_s']:.2f}"
+        out.append(f"| {r['points']:,} | {r['seconds']:.1f} | {f'**{rate}**' if i == len(rows) - 1 else rate} | "
+                   f"{r['m_rays_per_s']:.2f} | {r['peak_rss_mb']:.0f} | {r['laz_mb']:.1f} |")
+    if len(rows) > 1:
+        ratio = d["ratios"].get("peak_largest_over_previous", rows[-1]["peak_rss_mb"] / rows[-2]["peak_rss_mb"])
+        out += ["", f"Peak memory {_size(rows[-1]['points'])} / {_size(rows[-2]['points'])} "
+                f"**{ratio:.2f}**."]
+    return "\n".join(out)
+
+
+def ingest() -> str:
+    """``bench_ingest.py``: per file the raw read beside the ingest; the LAZ memory ratio."""
+    d = _load("ingest.json")
+    out = ["| file | points | raw read M pts/s | ingest s | ingest M pts/s | ingest / raw | peak MB | CPU s raw / ingest |",
+           "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    for r in d["rows"]:
+        ratio = f"{r['ingest_over_raw']:.2f}"
+        out.append(f"| {r['file']} | {_n(r['points'])} | {r['raw_m_points_per_s']:.2f} | {r['ingest_s']:.1f} | "
+                   f"{r['ingest_m_points_per_s']:.2f} | {f'**{ratio}**' if r['file'] == 'LAZ' else ratio} | "
+                   f"{r['peak_mb']:.0f} | {r['raw_cpu_s']:.1f} / {r['ingest_cpu_s']:.1f} |")
+    laz = [r for r in d["rows"] if r["file"] == "LAZ"]
+    if "peak_laz_largest_over_smallest" in d["ratios"]:
+        out += ["", f"Peak memory LAZ {_size(laz[-1]['points'])} / {_size(laz[0]['points'])} "
+                f"**{d['ratios']['peak_laz_largest_over_smallest']:.2f}x**."]
+    return "\n".join(out)
+
+
+def coarse_repeats() -> str:
+    """``bench_coarse.py --only-repeats``: our tile kernel against CGAL tuned, means of N runs."""
+    d = _load("coarse-repeats.json")
+    out = ["| site | ours: tile kernel, mean s / mean recall (per run) | CGAL tuned: mean s / mean recall (per run) "
+           "| ratio of means |", "| --- | --- | --- | ---: |"]
+    for s in (s for s in d["sites"] if "repeats" in s):
+        r = s["repeats"]
+        cells = [f"{r[f'{k}_s']:.2f} / **{r[f'{k}_recall']:.3f}** ({' '.join(f'{x:.2f}' for x in r[f'{k}_recalls'])})"
+                 for k in ("ours", "cgal_tuned")]
+        out.append(f"| {s['site']} | {cells[0]} | {cells[1]} | **{r['ratio_of_means']:.2f}** |")
+    return "\n".join(out)
+
+
+def coarse_once() -> str:
+    """``bench_coarse.py``: every method once, seconds / recall; the best recall per site in bold."""
+    d = _load("coarse.json")
+    sites = [s for s in d["sites"] if s.get("once")]
+    methods = [m["method"] for m in sites[0]["once"]]
+    out = ["| site | " + " | ".join(methods) + " |", "| --- |" + " --- |" * len(methods)]
+    for s in sites:
+        best = max(f"{m['recall']:.2f}" for m in s["once"])
+        cells = [f"{m['s']:.1f} / " + (f"**{best}**" if f"{m['recall']:.2f}" == best else f"{m['recall']:.2f}")
+                 for m in s["once"]]
+        out.append(f"| {s['site']} | " + " | ".join(cells) + " |")
+    return "\n".join(out)
+
+
+def sparse_points() -> str:
+    """``bench_sparse_points.py``: the spacing test against the query it replaced."""
+    d = _load("sparse-points.json")
+    out = ["| site | sparse rows | before s | after s | ratio |", "| --- | ---: | ---: | ---: | ---: |"]
+    out += [f"| {r['site']} | {_n(r['sparse_rows'])} | {r['before_s']:.3f} | {r['after_s']:.3f} | {r['ratio']:.2f} |"
+            for r in d["rows"]]
+    return "\n".join(out)
+
+
+def _sig3(x: float) -> str:
+    return f"{x:#.3g}".rstrip(".")
+
+
+def hollownet() -> str:
+    """``bench_hollownet.py``: one column per machine (``hollownet.json`` first), the paper's last."""
+    runs = [_load("hollownet.json")] + [json.loads(f.read_text()) for f in sorted(RESULTS.glob("hollownet-*.json"))]
+    head = runs[0]
+
+    def row(name: str, cell: Callable[[int, dict], str], paper: str) -> str:
+        return f"| {name} | " + " | ".join(cell(i, d) for i, d in enumerate(runs)) + f" | {paper} |"
+
+    def infer(d: dict, p: str) -> str:
+        a, b = (d[f"inference_ms_per_segment_b64_{p}_{t}threads"] for t in (1, 2))
+        return f"{_sig3(a)} / {_sig3(b)} ms"
+
+    def acc(i: int, d: dict) -> str:
+        a, b = d["heldout_accuracy_float32"], d.get("heldout_accuracy_bfloat16")
+        text = f"**{100 * a:.2f} %**" if i == 0 else f"{100 * a:.2f} %"
+        return text + ("" if b is None else " (bfloat16 too)" if b == a else f" (bfloat16: {100 * b:.2f} %)")
+
+    out = ["| measure | " + " | ".join(f"{_cpu(d)} ({', '.join(d['isa'])})" for d in runs) + " | paper |",
+           "| --- |" + " --- |" * (len(runs) + 1),
+           row("voxelise 100 k points (canonical yaw; each in a batch of 64)",
+               lambda i, d: f"{d['voxelize_ms_canonical_False']:.2f} ms ({d['voxelize_ms_canonical_True']:.2f}; "
+                            f"{d['voxelize_batch64_ms_per_segment']:.2f})", "131 ms"),
+           row("inference, batch 64, float32 (default), 1 / 2 threads", lambda i, d: infer(d, "float32"), "50 ms"),
+           row("inference, batch 64, bfloat16 autocast, 1 / 2 threads",
+               lambda i, d: infer(d, "bfloat16") + ("" if d["bf16_native"] else " (emulated: not on such CPUs)"),
+               "50 ms"),
+           row(f"`Classifier.predict` on points, {head['heldout_samples']} segments",
+               lambda i, d: f"{d['predict_points_ms_per_segment_float32']:.1f} ms float32" + (
+                   f", {d['predict_points_ms_per_segment_bfloat16']:.1f} ms bfloat16"
+                   if "predict_points_ms_per_segment_bfloat16" in d else ""), "181 ms"),
+           row(f"held-out accuracy ({head['heldout_samples']} segments, seed {head['args']['seed']})", acc, "99.03 %")]
+    return "\n".join(out)
+
+
+def _curve(curve: str) -> str:
+    if curve.startswith("none"):
+        return "(no curve)"
+    shape, _, r = curve.partition(" r=")
+    return f"({shape} r = {r} m)"
+
+
+def tree_segments() -> str:
+    """``bench_tree.py``: the sequences per segment, ms and (ratio to 50 ms)."""
+    d = _load("tree.json")
+    names = {"arcade": "straight arcade"}
+    out = ["| segment | psi | s1 (with psi) | s2 | s3 (with psi) | propose (+ storeys) |",
+           "| --- | ---: | ---: | ---: | ---: | ---: |"]
+    for name, s in d["segments"].items():
+        seq = [f"{1e3 * s[k]:.1f} ({s[k] / 0.05:.2f})" for k in ("s1 (with psi)", "s2", "s3 (with psi)")]
+        out.append(f"| {names.get(name, name.replace('_', ' '))} {_curve(s['curve'])} | {1e3 * s['psi']:.1f} | "
+                   + " | ".join(seq) + f" | {1e3 * s['propose (S1+S2+S3+storeys, one psi)']:.1f} |")
+    return "\n".join(out)
+
+
+def tree_whole() -> str:
+    """``bench_tree.py``: the whole tree of the minaret per classifier; the default in bold."""
+    d = _load("tree.json")
+    out = [f"| whole tree, minaret, {_n(int(d['segments']['minaret']['n_points']))} points, max_depth 3 | "
+           "total s (ratio to 1 s) | classifier s | calls | segments classified | nodes | root split |",
+           "| --- | ---: | ---: | ---: | ---: | ---: | --- |"]
+    for label, t in d["trees"].items():
+        if not isinstance(t, dict):
+            continue
+        total, bold = f"{t['total']:.2f} ({t['total'] / 1.0:.2f})", "(default)" in label
+        root = f"{t['root children']} x S{t['root sequence']}" if t["root children"] else "none"
+        out.append(f"| {f'**{label}**' if bold else label} | {f'**{total}**' if bold else total} | "
+                   f"{t['classifier']:.2f} | {t['calls']} | {t['segments classified']} | {t['nodes']} | {root} |")
+    return "\n".join(out)
+
+
+def workflow() -> str:
+    """``bench_workflow.py``: per line of ``hollowtree run`` its time and the peaks so far (target 4 GiB)."""
+    d = _load("workflow.json")
+    out = ["| after stage | t (s) | peak single process (MB) | peak sum of processes (MB) |", "| --- | --- | --- | --- |"]
+    for r in d["rows"]:
+        name = f"outputs ({d['outputs']})" if r["line"] == "outputs" and d.get("outputs") else r["line"]
+        out.append(f"| {name} | {r['t_s']:.1f} | {r['peak_process_mb']:.0f} | {r['peak_sum_mb']:.0f} |")
+    out += ["", f"Peak of all processes **{d['peak_sum_gib']:.2f} GiB** ({d['peak_sum_gib'] / 4:.2f} of the target); "
+            f"wall {d['wall_s']:.0f} s."]
+    return "\n".join(out)
+
+
+def store() -> str:
+    """``bench_store.py``: requests and seconds per store and way of writing."""
+    d = _load("store.json")
+    out = ["| store | way | requests | per array | s |", "| --- | --- | --- | --- | --- |"]
+    for r in d["rows"]:
+        way = f"Zarr `{r['way'][5:]}`" if r["way"].startswith("zarr ") else f"`{r['way']}`"
+        req = "-" if r["requests"] is None else _n(r["requests"])
+        per = "-" if r["per_array"] is None else f"{r['per_array']:.1f}"
+        out.append(f"| {r['store']} | {way} | {req} | {per} | {r['s']:.2f} |")
+    q = d["ratios"]
+    out += ["", f"write_unit / Zarr: **{q['s3_requests']:.2f} of the requests**, {q['s3_time']:.2f} of the time on "
+            f"S3, {q['local_time']:.2f} locally."]
+    return "\n".join(out)
+
+
 # --- docs/results.md ---------------------------------------------------------------------
 
 def derawar() -> str:
@@ -329,6 +510,16 @@ GENERATORS: dict[str, Callable[[], str]] = {
     "small": small,
     "scale-workers": scale_workers,
     "fuzz": fuzz,
+    "synth": synth,
+    "ingest": ingest,
+    "coarse-repeats": coarse_repeats,
+    "coarse-once": coarse_once,
+    "sparse-points": sparse_points,
+    "hollownet": hollownet,
+    "tree-segments": tree_segments,
+    "tree-whole": tree_whole,
+    "workflow": workflow,
+    "store": store,
     "derawar": derawar,
     "val-history": val_history,
     "workflow-keys": workflow_keys,
