@@ -18,6 +18,7 @@ Store layout written here (``docs/store.md``)::
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, replace
@@ -29,6 +30,7 @@ import pyarrow as pa
 from hollowtree.errors import ConfigError, PipelineError
 from hollowtree.pipeline.coarse_stitch import READ_ROWS, stitch
 from hollowtree.pipeline.graph import in_child
+from hollowtree.pipeline.timing import UNIT_BALANCE, balance
 from hollowtree.primitives.dbscan import window_spacing
 from hollowtree.primitives.group import (
     segment_contacts_chunked,
@@ -45,7 +47,7 @@ from hollowtree.primitives.segment import (
 from hollowtree.tiling.stage import Stage, params_hash
 from hollowtree.tiling.store import CHUNK_POINTS, RunStore
 
-__all__ = ["CoarseParams", "PRIMITIVE_CODES", "coarse_tile", "run_coarse", "CoarseReport"]
+__all__ = ["CoarseParams", "PRIMITIVE_CODES", "balanced_block_points", "coarse_tile", "run_coarse", "CoarseReport"]
 
 logger = logging.getLogger(__name__)
 
@@ -354,6 +356,48 @@ def scan_spacing(store: RunStore, sizes: dict[int, int], *, seed: int = 0) -> fl
         return None
 
 
+def _first_round(sizes: list[int], cap: int) -> list[float]:
+    """The points of the first round's units when tiles above ``cap`` are cut into blocks:
+    median cuts (``primitives.blocks.split_blocks``) make ``2**k`` blocks of about
+    ``n / 2**k`` points of a tile of ``n``, ``k = ceil(log2(n / cap))``."""
+    out: list[float] = []
+    for n in sizes:
+        k = math.ceil(math.log2(n / cap)) if n > cap else 0
+        out += [n / 2**k] * 2**k
+    return out
+
+
+def balanced_block_points(sizes: list[int], block_points: int, *, limit: float = UNIT_BALANCE) -> int:
+    """The block size of a run (issue 44): ``block_points``, or less where tiles near it
+    would stand beside units far smaller, so that the stage's first round (a unit per tile
+    at or below the block size, one per block above it) holds no unit above about
+    ``limit`` times the median unit's points.
+
+    From the tiles' points (``sizes``; tiles without points are no work and left out),
+    the largest size from ``block_points`` down in steps of a tenth, to ``block_points / 8``,
+    whose predicted units (:func:`_first_round`) are within ``0.8 * limit``; the one with
+    the smallest ratio where none is. A scan whose tiles are alike keeps ``block_points``.
+
+    >>> balanced_block_points([47_559, 51_595, 118_922, 783_473], 2_200_000)
+    366894
+    >>> balanced_block_points([900_000, 1_000_000, 1_100_000, 0], 2_200_000)
+    2200000
+    """
+    pts = [int(n) for n in sizes if n > 0]
+    if not block_points or not pts:
+        return block_points
+    best: tuple[float, int] | None = None
+    cap = int(block_points)
+    while cap >= max(block_points // 8, 1):
+        ratio = balance(_first_round(pts, cap)) or 1.0
+        if ratio <= 0.8 * limit:
+            return cap
+        if best is None or ratio < best[0]:
+            best = (ratio, cap)
+        cap = int(cap * 0.9)
+    return best[1] if best else block_points
+
+
 def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     """Run the coarse stage on an ingested store (resumable per tile), then stitch."""
     t0 = time.perf_counter()
@@ -381,7 +425,9 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
         eps = auto_eps if eps is None else eps
         if cluster_epsilon is None:
             cluster_epsilon = max(0.15, 2.0 * auto_eps / 3.0)
-    params = replace(params, cluster_epsilon=float(cluster_epsilon), eps=float(eps))
+    # Blocks sized by the tiles' points, like eps by the scan's spacing: a derived parameter.
+    cap = balanced_block_points([int(done_ingest[str(t)].get("n_points", 0)) for t in tiles], params.block_points)
+    params = replace(params, cluster_epsilon=float(cluster_epsilon), eps=float(eps), block_points=cap)
     cfg = {"params": params.to_dict(), "eps": float(eps), "algorithm": COARSE_ALGORITHM}
     h = params_hash([cfg, attrs["ingest"]["params_hash"]])
     cfg["params_hash"] = h

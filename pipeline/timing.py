@@ -95,12 +95,13 @@ def waves(records: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> list[Wave]:
 
 
 def balance(points: Sequence[int]) -> float | None:
-    """The largest of a wave's unit sizes over their median (None when the median is 0).
+    """The largest of a wave's unit sizes over their median; units of no points (an empty
+    tile's, which do no work) are left out; None when none is left.
 
-    >>> balance([10, 20, 30, 90]), balance([0, 0, 5]), balance([])
-    (3.6, None, None)
+    >>> balance([10, 20, 30, 90]), balance([0, 0, 5, 5]), balance([0])
+    (3.6, 1.0, None)
     """
-    pts = sorted(points)
+    pts = sorted(p for p in points if p > 0)
     if not pts:
         return None
     n = len(pts)

@@ -39,7 +39,9 @@ class TreeStageParams(Params, owner="tree"):
         ``"split-model"`` (the learned split model, ``tree/data/split-v1.json``) or
         ``"energy"`` (the paper's ``xi = w . e``, ``tree/data/energy-v1.json``).
     batch_points : int
-        Points per task (small segments are batched; a larger segment is one task).
+        Points per task (small segments are batched; a larger segment is one task); more
+        where the largest would otherwise hold over 3x the median task's points
+        (``pipeline.tree_stage.plan_batches``).
     weights : str or None
         HollowNet weights; None = the shipped default.
     split_model : str or None

@@ -38,6 +38,7 @@ import pyarrow as pa
 from hollowtree.classes import PLANAR_CLASSES, ClassId
 from hollowtree.errors import ConfigError, PipelineError
 from hollowtree.pipeline.graph import in_child
+from hollowtree.pipeline.timing import UNIT_BALANCE
 from hollowtree.pipeline.tree_params import DEVICES, TreeStageParams
 from hollowtree.tiling.stage import Stage, params_hash
 from hollowtree.tiling.store import RunStore
@@ -49,29 +50,56 @@ STAGE = "tree"
 #: Version of the tree's algorithm (tree/): part of the stage's parameters hash and of the
 #: workflow parameters a run records, so a store made by an older version is redone. What
 #: each version changed is in CHANGELOG.md (and git).
-TREE_ALGORITHM = "tree-v22"
+TREE_ALGORITHM = "tree-v23"
 #: Points sampled from each wall instance for the frames (tree/frames.py): a pier's face
 #: beside a bay's jamb is a strip a few tenths of a metre wide in a facade's wall.
 WALL_SAMPLE_POINTS = 16384
 
 
-def plan_batches(offsets: np.ndarray, batch_points: int) -> list[tuple[int, int]]:
-    """Consecutive segment ranges ``[lo, hi)`` (0-based rows of ``offsets``) of about
-    ``batch_points`` points; a segment larger than that is a range of its own.
-
-    >>> plan_batches(np.array([0, 10, 20, 100, 105, 110]), 25)
-    [(0, 2), (2, 3), (3, 5)]
-    """
+def _greedy_batches(sizes: list[int], target: int, alone: int | None) -> list[tuple[int, int]]:
     out: list[tuple[int, int]] = []
-    sizes = np.diff(offsets)
     lo, acc = 0, 0
-    for g, n in enumerate(sizes.tolist()):
-        if acc and acc + n > batch_points:
+    for g, n in enumerate(sizes):
+        if acc and (acc + n > target or (alone and (n > alone or sizes[lo] > alone))):
             out.append((lo, g))
             lo, acc = g, 0
         acc += n
     if len(sizes) > lo:
         out.append((lo, len(sizes)))
+    return out
+
+
+def plan_batches(offsets: np.ndarray, batch_points: int, *, alone: int | None = None,
+                 balance: float | None = None) -> list[tuple[int, int]]:
+    """Consecutive segment ranges ``[lo, hi)`` (0-based rows of ``offsets``) of about
+    ``batch_points`` points; a segment larger than that is a range of its own, and so is
+    one above ``alone`` (``max_group_points``: built on a sample).
+
+    With ``balance``, the batches are made larger than ``batch_points`` where needed
+    (in steps of a tenth) until the largest holds at most ``balance`` times the median
+    batch's points (issue 44), or hold every point: one large element group, which is
+    never split, then no longer stands beside many batches far smaller than it.
+
+    >>> plan_batches(np.array([0, 10, 20, 100, 105, 110]), 25)
+    [(0, 2), (2, 3), (3, 5)]
+    >>> plan_batches(np.array([0, 10, 20, 100, 105, 110]), 25, alone=50, balance=3.0)
+    [(0, 2), (2, 3), (3, 5)]
+    >>> plan_batches(np.array([0, 10, 20, 100, 105, 110]), 200, alone=50)
+    [(0, 2), (2, 3), (3, 5)]
+    >>> plan_batches(np.array([0, 5, 10, 15, 20, 25, 30, 90]), 5, balance=3.0)
+    [(0, 4), (4, 6), (6, 7)]
+    """
+    sizes = np.diff(offsets).tolist()
+    target = max(int(batch_points), 1)
+    out = _greedy_batches(sizes, target, alone)
+    if balance is None:
+        return out
+    while len(out) > 1 and target < int(offsets[-1]):  # beyond every point the plan changes no more
+        pts = np.asarray([offsets[hi] - offsets[lo] for lo, hi in out])
+        if pts.max() <= balance * float(np.median(pts)):
+            break
+        target = max(target + 1, int(target * 1.1))
+        out = _greedy_batches(sizes, target, alone)
     return out
 
 
@@ -222,7 +250,7 @@ def _sampled_group_tree(store: RunStore, b: int, lo: int, hi: int, s: int, scale
         writer.append({k: v[j] for k, v in values.items()})
         n_leaf += np.bincount(values["leaf"][j].astype(np.int64), minlength=len(n_leaf))
     writer.close(values)
-    _write_samples(store, b, sample, values, params.seed, s)
+    _write_samples(store, b, sample, values, params.seed, [(0, len(sample), s)])
     # Every node counts the group's points in its leaves (children come after their parent).
     parent = np.asarray(cols["parent"], dtype=np.int64)
     for k in range(len(parent) - 1, 0, -1):
@@ -232,17 +260,21 @@ def _sampled_group_tree(store: RunStore, b: int, lo: int, hi: int, s: int, scale
 
 
 def _write_samples(store: RunStore, b: int, xyz: np.ndarray, values: dict[str, np.ndarray], seed: int,
-                   s: int) -> None:
+                   groups: list[tuple[int, int, int]]) -> None:
     """A seeded sample of every arch and dome instance's points of batch ``b``, and of
     every wall instance's (``WALL_SAMPLE_POINTS``) (``tree/samples/<b>``: batch-local
     instance, store-local metres, points per sampled point, class), for the arcade rows
-    (tree/rows.py) and the frames (tree/frames.py)."""
+    (tree/rows.py) and the frames (tree/frames.py). ``groups``: ``(first row, end row,
+    first segment)`` of each element group; each is drawn with a generator of its own, so
+    a group's sample does not depend on the batch that holds it."""
     from hollowtree.tree.rows import instance_sample
 
-    rng = np.random.default_rng(np.random.SeedSequence([seed, s + 1, 2]))
-    parts = [instance_sample(xyz, values["instance"], values["class"], rng),
-             instance_sample(xyz, values["instance"], values["class"], rng, n=WALL_SAMPLE_POINTS,
-                             classes=(int(ClassId.WALL),))]
+    parts = []
+    for a, z, s in groups:
+        rng = np.random.default_rng(np.random.SeedSequence([seed, s + 1, 2]))
+        inst, cls = values["instance"][a:z], values["class"][a:z]
+        parts += [instance_sample(xyz[a:z], inst, cls, rng),
+                  instance_sample(xyz[a:z], inst, cls, rng, n=WALL_SAMPLE_POINTS, classes=(int(ClassId.WALL),))]
     inst, pts, weight, cls = (np.concatenate([p[k] for p in parts]) for k in range(4))
     store.write_unit(f"tree/samples/{b}", {"instance": inst, "xyz": pts, "weight": weight, "class": cls})
 
@@ -283,15 +315,17 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
                "score": np.zeros(n, np.float32)}
         cols = {c: [] for c in _NODE_COLUMNS}
         n_inst = 0
+        groups = []
         for s, s_end in zip(bounds[:-1], bounds[1:], strict=True):
             a, z = int(offsets[s]) - lo, int(offsets[s_end]) - lo
+            groups.append((a, z, s))
             values, group_cols, n_inst = _group_tree(xyz[a:z], s, params, clf, ground_level(s, s_end), n_inst)
             for k, v in values.items():
                 out[k][a:z] = v
             for c in _NODE_COLUMNS:
                 cols[c] += group_cols[c]
         store.write_unit(f"tree/batches/{b}", out)
-        _write_samples(store, b, xyz, out, params.seed, segs[0])
+        _write_samples(store, b, xyz, out, params.seed, groups)
     store.write_table(f"tree/tables/{b}.parquet", pa.table(cols))
     info = {"params_hash": cfg["params_hash"], "n_segments": segs[1] - segs[0], "n_points": n,
             "n_nodes": len(cols["segment"]), "n_instances": n_inst, "csr": [lo, hi]}
@@ -355,8 +389,12 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any, device: str = "c
     offsets = store.read_unit("coarse/csr", ["offsets"])["offsets"]
     # Batches of whole element groups (a group is a run of consecutive segments).
     starts = group_starts(store)
-    batches = [(int(starts[g0]), int(starts[g1])) for g0, g1 in plan_batches(offsets[starts], params.batch_points)]
-    done = stage.done()
+    batches = [(int(starts[g0]), int(starts[g1])) for g0, g1 in
+               plan_batches(offsets[starts], params.batch_points, alone=params.max_group_points or None,
+                            balance=UNIT_BALANCE)]
+    # A record counts only for the batch it was made for (batches planned otherwise before).
+    done = {k: v for k, v in stage.done().items() if k.isdigit() and int(k) < len(batches)
+            and v.get("csr") == [int(offsets[batches[int(k)][0]]), int(offsets[batches[int(k)][1]])]}
     todo = [b for b in range(len(batches)) if str(b) not in done]
     ground = _ground_levels(store) if todo and (params.roof_min_height is not None
                                                 or params.other_max_base is not None) else None

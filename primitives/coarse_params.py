@@ -112,7 +112,9 @@ class CoarseParams(Params, owner="coarse"):
         scan (a tile near a scanner station can hold several times the average). 0 =
         never. Default 2.2 M, a little over the ingest's average tile (``tile_points``,
         2 M), so that a tile of about the average stays whole (docs/method.md, "Blocks
-        inside a dense tile").
+        inside a dense tile"). A run lowers it (to an eighth at most) where its tiles
+        are uneven, until no task holds much over 3x the median task's points
+        (``pipeline.coarse.balanced_block_points``).
     block_margin : float or None
         Context around a block, metres; None = min(the tile buffer, 2 x the DBSCAN eps).
         Dense blocks are small (a 1 M-point block near a station can be 3 x 4 m), so a

@@ -1,0 +1,55 @@
+"""Units balanced by points (issue 44): on a deliberately uneven scan, the coarse stage's
+blocks and the tree's batches hold no unit above ``UNIT_BALANCE`` times its wave's median
+(the tree's batches of an uneven spread of element groups: ``plan_batches`` below)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hollowtree.pipeline.coarse import CoarseParams, balanced_block_points, run_coarse
+from hollowtree.pipeline.graph import task_runner
+from hollowtree.pipeline.timing import UNIT_BALANCE, WAVES, balance, waves
+from hollowtree.pipeline.tree_stage import TreeStageParams, plan_batches, run_tree
+from hollowtree.scenes.synth import synth
+from hollowtree.tiling.ingest import IngestParams, ingest
+from hollowtree.tiling.store import RunStore
+
+
+@pytest.fixture(scope="module")
+def uneven(tmp_path_factory) -> Path:
+    """A minaret on 20 m tiles: its tiles hold 61 to 19 859 points (12.7x the median)."""
+    d = tmp_path_factory.mktemp("units")
+    synth("minaret", d / "m.laz", n_points=60_000, seed=2)
+    store = d / "s"
+    with task_runner("sync", progress=False) as run:
+        ingest([str(d / "m.laz")], str(store), IngestParams(tile_size=20.0, buffer=2.0), runner=run)
+        run_coarse(str(store), CoarseParams(eps=0.3, block_points=20_000), runner=run)
+        run_tree(str(store), TreeStageParams(batch_points=2_000), runner=run)
+    return store
+
+
+def _ratios(store: Path) -> dict[str, float | None]:
+    s = RunStore.open(store)
+    return {f"{w.stage}.{w.name}": balance(w.points) for w in waves({n: s.records(n) for _, _, n in WAVES})}
+
+
+def test_coarse_blocks_and_tree_batches_are_balanced_by_points(uneven):
+    ratios = _ratios(uneven)
+    assert ratios["ingest.tiles"] > 3 * UNIT_BALANCE  # the scan is uneven
+    assert ratios["coarse.tiles"] <= UNIT_BALANCE
+    assert ratios["tree.batches"] <= UNIT_BALANCE
+
+
+def test_alike_tiles_keep_block_points_and_one_large_group_stays_alone():
+    assert balanced_block_points([900_000, 1_000_000, 1_100_000], 2_200_000) == 2_200_000
+    # one group of 90 points above max_group_points (50) beside many of 5: alone, the others batched
+    offsets = np.r_[0, np.cumsum([5] * 40 + [90] + [5] * 40)]
+    plan = plan_batches(offsets, 5, alone=50, balance=UNIT_BALANCE)
+    sizes = [int(offsets[b] - offsets[a]) for a, b in plan]
+    assert 90 in sizes
+    assert (40, 41) in plan
+    assert max(sizes) <= UNIT_BALANCE * np.median(sizes)
+    assert plan_batches(offsets, 5) == [(g, g + 1) for g in range(81)]  # without balance: one group a batch
