@@ -77,8 +77,10 @@ def plan_batches(offsets: np.ndarray, batch_points: int, *, alone: int | None = 
 
     With ``balance``, the batches are made larger than ``batch_points`` where needed
     (in steps of a tenth) until the largest holds at most ``balance`` times the median
-    batch's points (issue 44), or hold every point: one large element group, which is
-    never split, then no longer stands beside many batches far smaller than it.
+    batch's points (issue 44): one large element group, which is never split, then no
+    longer stands beside many batches far smaller than it. They grow to ``alone`` at most
+    (or to every point, without it): a group above it is built on a sample of that many
+    points, so a batch larger than that would take longer than the group beside it.
 
     >>> plan_batches(np.array([0, 10, 20, 100, 105, 110]), 25)
     [(0, 2), (2, 3), (3, 5)]
@@ -88,17 +90,20 @@ def plan_batches(offsets: np.ndarray, batch_points: int, *, alone: int | None = 
     [(0, 2), (2, 3), (3, 5)]
     >>> plan_batches(np.array([0, 5, 10, 15, 20, 25, 30, 90]), 5, balance=3.0)
     [(0, 4), (4, 6), (6, 7)]
+    >>> plan_batches(np.array([0, 5, 10, 15, 20, 25, 30, 90]), 5, alone=10, balance=3.0)
+    [(0, 2), (2, 4), (4, 6), (6, 7)]
     """
     sizes = np.diff(offsets).tolist()
     target = max(int(batch_points), 1)
     out = _greedy_batches(sizes, target, alone)
     if balance is None:
         return out
-    while len(out) > 1 and target < int(offsets[-1]):  # beyond every point the plan changes no more
+    most = min(int(offsets[-1]), alone) if alone else int(offsets[-1])
+    while len(out) > 1 and target < most:
         pts = np.asarray([offsets[hi] - offsets[lo] for lo, hi in out])
         if pts.max() <= balance * float(np.median(pts)):
             break
-        target = max(target + 1, int(target * 1.1))
+        target = min(max(target + 1, int(target * 1.1)), most)
         out = _greedy_batches(sizes, target, alone)
     return out
 
