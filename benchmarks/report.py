@@ -34,10 +34,10 @@ RESULTS = REPO / "benchmarks" / "results"
 LATEST = {
     "test": "generalize-test-forts-tree-v21.json",
     "test-5m": "generalize-test-5m-forts-tree-v21.json",
-    "val-4m": "generalize-val-4m-forts-tree-v21.json",
+    "val-4m": "generalize-val-4m-tree-v23.json",
     "val-1m": "generalize-val-density-1m-forts-tree-v21.json",
     "val-10m": "generalize-val-density-10m-tree-v21.json",
-    "val": "generalize-val-tree-v22.json",
+    "val": "generalize-val-tree-v23.json",
     # the element check (tree.verify=true, not the default) on the same test sites
     "test-check": "generalize-test-check-tree-v22.json",
     "test-5m-check": "generalize-test-5m-check-tree-v22.json",
@@ -62,6 +62,10 @@ VAL_VARIANTS = {
     "generalize-val-4m-forts-tree-v20.json": "`tree-v20`, forts with bastions along their walls",
     "generalize-val-4m-forts-tree-v21.json": "`tree-v21`, forts with bastions along their walls",
     "generalize-val-4m-check30.json": "`tree-v22`'s element check fitted on 30 training sites, threshold 0.2",
+    "generalize-val-4m-split-proc.json": "rejected: split model fitted on 140 procedural training scans, threshold 0.35",
+    "generalize-val-4m-split-proc-t05.json": "rejected: the same at threshold 0.5",
+    "generalize-val-4m-split-both.json": "rejected: split model fitted on those and the 52 random scenes, threshold 0.4",
+    "generalize-val-4m-tree-v23.json": "`tree-v23`: instance samples drawn per group, not per batch",
 }
 
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
