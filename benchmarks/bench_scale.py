@@ -46,7 +46,6 @@ import argparse
 import json
 import math
 import os
-import platform
 import shutil
 import subprocess
 import sys
@@ -57,6 +56,7 @@ from typing import Any
 
 import psutil
 from _procs import tree_rss
+from _results import cpu_model
 
 REPO = Path(__file__).resolve().parents[1]
 STAGES = ("ingest", "coarse", "tree", "labels", "outputs")
@@ -124,17 +124,6 @@ def measure(cmd: list[str]) -> tuple[int, float, list[dict[str, float]]]:
     stop.set()
     th.join()
     return child.returncode, time.perf_counter() - t0, rows
-
-
-def cpu_model() -> str:
-    """The CPU's model name (Linux ``/proc/cpuinfo``; ``platform.processor()`` elsewhere)."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def reference_read(path: Path, min_seconds: float = 3.0) -> float:
