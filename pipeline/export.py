@@ -38,7 +38,7 @@ from laspy.vlrs.known import ClassificationLookupVlr
 
 from hollowtree.classes import CLASS_NAMES, NUM_CLASSES, ClassId
 from hollowtree.errors import ConfigError, PipelineError
-from hollowtree.pipeline.labels import require_labels
+from hollowtree.pipeline.labels import require_labels, tile_parts
 from hollowtree.tiling.readers import las_crs, read_blocks
 from hollowtree.tiling.store import RunStore
 
@@ -327,13 +327,13 @@ def _sample(store: RunStore, n_max: int, seed: int = 0) -> tuple[np.ndarray, np.
         want = d["index"][pick]
         cls = np.zeros(len(pick), np.uint8)
         todo = np.ones(len(pick), bool)
-        for j in range(len(parts[str(t)]["parts"])):  # the part that holds each point
-            if not todo.any():  # kept points are in the first parts; dropped ones after
+        for group in tile_parts(parts, t):  # the part that holds each point
+            if not todo.any():  # kept points are in each slice's first parts; dropped ones after
                 break
-            part_index = store.read_slice(f"labels/parts/{t}/{j}/index")
+            part_index = store.read_slice(f"{group}/index")
             at = np.minimum(np.searchsorted(part_index, want), max(len(part_index) - 1, 0))
             found = todo & (part_index[at] == want) if len(part_index) else np.zeros(len(want), bool)
-            cls[found] = store.read_slice(f"labels/parts/{t}/{j}/class")[at[found]]
+            cls[found] = store.read_slice(f"{group}/class")[at[found]]
             todo &= ~found
         cls_all.append(cls)
         xyz_all.append(d["xyz"][pick] * scale + offset)

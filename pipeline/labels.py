@@ -2,15 +2,18 @@
 
 Two phases of Dask tasks, each unit recorded after its data like every other stage:
 
-1. ``labels: tiles`` (one task per tile): the tile's core rows get their coarse primitive
+1. ``labels: tiles`` (one task per tile, or per row slice of a tile far above the median:
+   :func:`plan_slices`, so that units are balanced by points, issue 44): the slice's core
+   rows get their coarse primitive
    and global segment (coarse stage) and their tree leaf, class, instance and score (tree
    stage, found through the row's CSR position); points dropped by voxel downsampling take
-   their representative's labels (the representative is a core row of the same tile),
-   looked up in the core rows' parts, two parts held at a time. The points are written as
-   parts of at most ``PART_ROWS`` points, each sorted by original index
-   (``labels/parts/<tile>/<j>``: first the core rows', then the dropped points'), so the
-   task's memory does not grow with the tile; the record keeps, for every part and output
-   range, which rows of the part fall in it.
+   their representative's labels (the representative is a core row of the same tile; a
+   slice takes the dropped points whose representative is among its rows), looked up in
+   the core rows' parts, two parts held at a time. The points are written as parts of at
+   most ``PART_ROWS`` points, each sorted by original index
+   (``labels/parts/<tile>/<slice>/<j>``: first the core rows', then the dropped points'), so
+   the task's memory does not grow with the tile; the record (``<tile>.<slice>``) keeps its
+   rows and, for every part and output range, which rows of the part fall in it.
 2. ``labels: ranges`` (one task per range of ``RANGE_ROWS`` input points, whole chunks):
    the parts' rows of the range are gathered and written to ``labels/<name>`` at their
    original index. Ranges never share a chunk, so tasks never race.
@@ -45,6 +48,7 @@ from hollowtree.errors import PipelineError
 from hollowtree.pipeline.coarse import MAX_SPACING
 from hollowtree.pipeline.graph import in_child
 from hollowtree.pipeline.tree_stage import MERGE_CLASS_MAP, MERGE_MAP, ROWS
+from hollowtree.pipeline.view_store import tile_parts
 from hollowtree.primitives.terrain import smrf_ground
 from hollowtree.tiling.grid import TileGrid
 from hollowtree.tiling.stage import Stage, params_hash
@@ -52,7 +56,7 @@ from hollowtree.tiling.store import CHUNK_POINTS, RunStore
 from hollowtree.tree.rows import ArcadeCells, apply_cells
 
 __all__ = ["LABEL_DTYPES", "RANGE_ROWS", "PART_ROWS", "LEAF_BITS", "run_labels", "labels_tile", "labels_range",
-           "part_rows", "LabelsReport"]
+           "part_rows", "plan_slices", "tile_parts", "LabelsReport"]
 
 TILE_STAGE = "labels_tiles"
 STAGE = "labels"
@@ -159,9 +163,9 @@ def _core_labels(store: RunStore, tile: int, start: int, stop: int, cfg: dict[st
     return pts["index"][core], {k: v.astype(LABEL_DTYPES[k]) for k, v in values.items()}
 
 
-def _write_part(store: RunStore, tile: int, j: int, index: np.ndarray, values: dict[str, np.ndarray],
+def _write_part(store: RunStore, group: str, index: np.ndarray, values: dict[str, np.ndarray],
                 n_points: int) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """Write part ``j`` of a tile sorted by original index; return it and its record entry
+    """Write part ``group`` sorted by original index; return it and its record entry
     (its length and, per output range it touches, its rows there). ``values`` are sorted
     in place of the caller's (one array at a time: the part is held once, not twice)."""
     order = np.argsort(index)
@@ -170,7 +174,7 @@ def _write_part(store: RunStore, tile: int, j: int, index: np.ndarray, values: d
     for k in LABEL_DTYPES:
         part[k] = values.pop(k)[order]
     del order
-    store.write_unit(f"labels/parts/{tile}/{j}", part)
+    store.write_unit(group, part)
     bounds = np.arange(0, n_points + RANGE_ROWS, RANGE_ROWS)
     cuts = np.searchsorted(part["index"], bounds.astype(np.uint64))
     ranges = {str(r): [int(cuts[r]), int(cuts[r + 1])] for r in range(len(bounds) - 1) if cuts[r + 1] > cuts[r]}
@@ -188,8 +192,9 @@ class _KeptParts:
     round to the first part (any order is correct; this one reads each part about once).
     """
 
-    def __init__(self, store: RunStore, tile: int, n_parts: int) -> None:
+    def __init__(self, store: RunStore, tile: int, n_parts: int, prefix: str | None = None) -> None:
         self.store, self.tile, self.n_parts = store, tile, n_parts
+        self.prefix = prefix or f"labels/parts/{tile}"
         self.held: OrderedDict[int, dict[str, np.ndarray]] = OrderedDict()
         self.last = 0
 
@@ -199,7 +204,7 @@ class _KeptParts:
         else:
             while len(self.held) >= 2:
                 self.held.popitem(last=False)
-            group = f"labels/parts/{self.tile}/{j}"
+            group = f"{self.prefix}/{j}"
             self.held[j] = {k: self.store.read_slice(f"{group}/{k}") for k in ("index", *LABEL_DTYPES)}
         return self.held[j]
 
@@ -230,45 +235,90 @@ class _KeptParts:
         return out
 
 
-def labels_tile(url: str, tile: int, cfg: dict[str, Any]) -> dict[str, Any]:
-    """Dask task: the labels of one tile's core points (and of their dropped neighbours).
+def plan_slices(sizes: dict[int, tuple[int, int]], *, above: float = 2.0) -> list[tuple[int, int, int, int]]:
+    """The units of the tile phase, ``(tile, slice, first row, end row)``, from each
+    tile's ``(rows, points)`` (points: its core rows and voxel-dropped points, the work).
 
-    Written as parts of at most ``PART_ROWS`` points (``labels/parts/<tile>/<j>``), so the
-    task's memory follows that, not the tile: first the tile's core rows, ``PART_ROWS``
-    rows at a time; then, with voxels, the dropped points, ``PART_ROWS`` at a time, each
-    taking its representative's labels from the first parts (:class:`_KeptParts`).
+    A tile above ``above`` times the median tile's points (tiles without points left out
+    of the median) is cut into ``ceil(points / median)`` slices of equal rows; the others
+    are one slice, so the largest unit stays near ``UNIT_BALANCE`` times the median unit.
+
+    >>> plan_slices({0: (10, 10), 1: (12, 10), 2: (50, 40), 3: (0, 0)})
+    [(0, 0, 0, 10), (1, 0, 0, 12), (2, 0, 0, 12), (2, 1, 12, 25), (2, 2, 25, 37), (2, 3, 37, 50), (3, 0, 0, 0)]
+    """
+    pts = sorted(p for _, p in sizes.values() if p > 0)
+    med = (pts[len(pts) // 2] if len(pts) % 2 else (pts[len(pts) // 2 - 1] + pts[len(pts) // 2]) / 2) if pts else 0
+    out = []
+    for t in sorted(sizes):
+        rows, points = sizes[t]
+        k = min(-(-int(points) // int(med)), max(rows, 1)) if med and points > above * med else 1
+        cuts = [i * rows // k for i in range(k + 1)]
+        out += [(t, s, cuts[s], cuts[s + 1]) for s in range(k)]
+    return out
+
+
+def labels_tile(url: str, tile: int, cfg: dict[str, Any], piece: tuple[int, int, int] | None = None) -> dict[str, Any]:
+    """Dask task: the labels of one tile's core points (and of their dropped neighbours),
+    or of slice ``piece = (slice, first row, end row)`` of them (:func:`plan_slices`).
+
+    Written as parts of at most ``PART_ROWS`` points (``labels/parts/<tile>/<slice>/<j>``),
+    so the task's memory follows that, not the tile: first the slice's core rows,
+    ``PART_ROWS`` rows at a time; then, with voxels, the dropped points whose representative
+    is among those rows, ``PART_ROWS`` of the tile's at a time, each taking its
+    representative's labels from the first parts (:class:`_KeptParts`).
     """
     store = RunStore.open(url, mode="a")
-    if store.has(f"labels/parts/{tile}"):  # an interrupted attempt, or another labels run
-        store.delete(f"labels/parts/{tile}")
     n_rows = store.array_length(f"tiles/{tile}/index")
+    s, first, end = piece if piece is not None else (0, 0, n_rows)
+    prefix = f"labels/parts/{tile}/{s}"
+    if store.has(prefix):  # an interrupted attempt
+        store.delete(prefix)
+    whole = first == 0 and end >= n_rows
     n_dropped = store.array_length(f"tiles/{tile}/voxel_dropped") if store.has(f"tiles/{tile}/voxel_dropped") else 0
     ground = None
     if cfg.get("terrain"):  # the whole tile, buffer included: the filter's windows reach past the core
         scale = np.asarray(store.attrs["coords"]["scale"], dtype=np.float64)
         ground = smrf_ground(store.read_slice(f"tiles/{tile}/xyz").astype(np.float64) * scale)
     parts = []
-    for start in range(0, max(n_rows, 1), PART_ROWS):
-        index, values = _core_labels(store, tile, start, min(start + PART_ROWS, n_rows), cfg, ground)
-        _, info = _write_part(store, tile, len(parts), index, values, cfg["n_points"])
+    own = []  # the slice's kept points (original index), where the tile has other slices
+    for start in range(first, max(end, first + 1), PART_ROWS):
+        index, values = _core_labels(store, tile, start, min(start + PART_ROWS, end), cfg, ground)
+        part, info = _write_part(store, f"{prefix}/{len(parts)}", index, values, cfg["n_points"])
+        if not whole and n_dropped:
+            own.append(part["index"])
+        del part
         parts.append(info)
-    kept = _KeptParts(store, tile, len(parts))
+    mine = np.sort(np.concatenate(own)) if own else np.zeros(0, np.uint64)
+    del own
+    kept = _KeptParts(store, tile, len(parts), prefix)
     for start in range(0, n_dropped, PART_ROWS):
         stop = min(start + PART_ROWS, n_dropped)
         rep = store.read_slice(f"tiles/{tile}/voxel_representative", start, stop)
+        sel = None
+        if not whole:  # the dropped points whose representative is this slice's
+            if not len(mine):
+                break
+            at = np.minimum(np.searchsorted(mine, rep), len(mine) - 1)
+            sel = np.flatnonzero(mine[at] == rep)
+            if not len(sel):
+                continue
+            rep = rep[sel]
         values = kept.labels_of(rep)
         del rep
         dropped = store.read_slice(f"tiles/{tile}/voxel_dropped", start, stop)
-        _, info = _write_part(store, tile, len(parts), dropped, values, cfg["n_points"])
+        if sel is not None:
+            dropped = dropped[sel]
+        _, info = _write_part(store, f"{prefix}/{len(parts)}", dropped, values, cfg["n_points"])
         parts.append(info)
-    info = {"params_hash": cfg["params_hash"], "n_points": int(sum(p["n"] for p in parts)), "parts": parts}
-    store.record(TILE_STAGE, str(tile), info)
+    info = {"params_hash": cfg["params_hash"], "tile": tile, "slice": s, "rows": [first, end],
+            "n_points": int(sum(p["n"] for p in parts)), "parts": parts}
+    store.record(TILE_STAGE, f"{tile}.{s}", info)
     return info
 
 
-def part_rows(info: dict[str, Any], tile: int) -> list[tuple[str, int, int, int]]:
-    """``(part group, range, first row, end row)`` of every output range a tile's parts touch."""
-    return [(f"labels/parts/{tile}/{j}", int(r), a, b)
+def part_rows(info: dict[str, Any]) -> list[tuple[str, int, int, int]]:
+    """``(part group, range, first row, end row)`` of every output range a unit's parts touch."""
+    return [(f"labels/parts/{info['tile']}/{info['slice']}/{j}", int(r), a, b)
             for j, part in enumerate(info["parts"]) for r, (a, b) in part["ranges"].items()]
 
 
@@ -305,7 +355,7 @@ class LabelsReport:
     seconds: float
 
     def summary(self) -> str:
-        return (f"labels: {self.n_labelled:,} of {self.n_points:,} input points labelled; tiles "
+        return (f"labels: {self.n_labelled:,} of {self.n_points:,} input points labelled; tile slices "
                 f"{self.tiles_run} run, {self.tiles_skipped} skipped; ranges {self.ranges_run} run, "
                 f"{self.ranges_skipped} skipped; {self.seconds:.1f} s")
 
@@ -323,7 +373,7 @@ def labels_hash(attrs: dict[str, Any], *, use_tree: bool) -> str:
     upstream = stages.get("tree" if use_tree else "coarse", {}).get("params_hash")
     if upstream is None:
         raise PipelineError(f"the {'tree' if use_tree else 'coarse'} stage has not run on this store")
-    return params_hash(["labels-v3", upstream, use_tree, terrain(attrs)])
+    return params_hash(["labels-v4", upstream, use_tree, terrain(attrs)])
 
 
 def terrain(attrs: dict[str, Any]) -> bool:
@@ -333,8 +383,21 @@ def terrain(attrs: dict[str, Any]) -> bool:
     return spacing is not None and float(spacing) > MAX_SPACING
 
 
+def _tile_sizes(store: RunStore, tiles: list[int]) -> dict[int, tuple[int, int]]:
+    """Each tile's rows and points to label (core rows and voxel-dropped points)."""
+    recs, h = store.records("ingest"), store.attrs["ingest"].get("params_hash")
+    out = {}
+    for t in tiles:
+        rows = store.array_length(f"tiles/{t}/index")
+        rec = recs.get(str(t), {})
+        core = int(rec["n_core"]) if rec.get("params_hash") == h and "n_core" in rec else rows
+        dropped = store.array_length(f"tiles/{t}/voxel_dropped") if store.has(f"tiles/{t}/voxel_dropped") else 0
+        out[t] = (rows, core + dropped)
+    return out
+
+
 def run_labels(url: str, *, use_tree: bool, runner: Any) -> LabelsReport:
-    """Write the per-point label arrays of the store (resumable per tile and range)."""
+    """Write the per-point label arrays of the store (resumable per tile slice and range)."""
     t0 = time.perf_counter()
     store = RunStore.open(url, mode="a")
     attrs = store.attrs
@@ -346,26 +409,37 @@ def run_labels(url: str, *, use_tree: bool, runner: Any) -> LabelsReport:
     stage.clear_if_changed()
     cfg = {"params_hash": h, "n_points": n_points, "tree": stages.get("tree") if use_tree else None,
            "terrain": terrain(attrs)}
+    sizes = _tile_sizes(store, tiles)
+    # A sparse scan's tiles stay whole: each slice would run the terrain filter on the whole tile.
+    plan = [(t, 0, 0, r) for t, (r, _) in sorted(sizes.items())] if cfg["terrain"] else plan_slices(sizes)
+    units = {f"{t}.{s}": (t, s, a, b) for t, s, a, b in plan}
+    recs_t = store.records(TILE_STAGE)
+    if any(k not in units or v.get("rows") != list(units[k][2:]) for k, v in recs_t.items()):
+        # records of another plan of slices (or of the tiles before them): all redone
+        store.clear_records(TILE_STAGE)
+        store.clear_records(STAGE)
     done_t = stage.done(TILE_STAGE)
-    todo_t = [t for t in tiles if str(t) not in done_t]
+    if not done_t:  # nothing kept: no part of an earlier layout or plan is left behind
+        store.delete("labels/parts")
+    todo_t = [k for k in units if k not in done_t]
     done_r = set(stage.done())
     if not done_r:  # first time with these parameters: fresh, zero-filled arrays
         for k, dt in LABEL_DTYPES.items():
             store.create_array(f"labels/{k}", shape=(n_points,), dtype=dt)
     # Each task in a child process of its worker (in_child): what one task leaves in a
     # worker's heap does not raise the next one's peak.
-    results = runner(in_child(labels_tile), [(url, t, cfg) for t in todo_t], "labels: tiles")
-    for t, info in zip(todo_t, results, strict=True):
-        done_t[str(t)] = info
+    results = runner(in_child(labels_tile), [(url, units[k][0], cfg, units[k][1:]) for k in todo_t], "labels: tiles")
+    for k, info in zip(todo_t, results, strict=True):
+        done_t[k] = info
     parts: dict[int, list[tuple[str, int, int]]] = {}
-    for t in tiles:
-        for group, r, a, b in part_rows(done_t[str(t)], t):
+    for k in units:
+        for group, r, a, b in part_rows(done_t[k]):
             parts.setdefault(r, []).append((group, a, b))
     n_ranges = -(-n_points // RANGE_ROWS)
     todo_r = [r for r in range(n_ranges) if str(r) not in done_r]
     runner(in_child(labels_range), [(url, r, parts.get(r, []), cfg) for r in todo_r], "labels: ranges")
-    n_labelled = sum(int(done_t[str(t)]["n_points"]) for t in tiles)
+    n_labelled = sum(int(done_t[k]["n_points"]) for k in units)
     stage.finish(n_ranges, tree=use_tree, n_labelled=n_labelled)
     return LabelsReport(store=url, n_points=n_points, n_labelled=n_labelled, tiles_run=len(todo_t),
-                        tiles_skipped=len(tiles) - len(todo_t), ranges_run=len(todo_r),
+                        tiles_skipped=len(units) - len(todo_t), ranges_run=len(todo_r),
                         ranges_skipped=n_ranges - len(todo_r), seconds=time.perf_counter() - t0)

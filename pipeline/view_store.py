@@ -25,7 +25,7 @@ from hollowtree.pipeline.view_lod import (
 )
 from hollowtree.tiling.store import CHUNK_POINTS, RunStore
 
-__all__ = ["ViewStore", "SEQUENCES", "PARTS_CACHE_BYTES", "LEAF_BITS", "CLASS_RGB"]
+__all__ = ["ViewStore", "SEQUENCES", "PARTS_CACHE_BYTES", "LEAF_BITS", "CLASS_RGB", "tile_parts"]
 
 #: ``labels/segment = coarse segment << LEAF_BITS | tree leaf`` (``pipeline.labels.LEAF_BITS``;
 #: not imported: pipeline.labels loads the whole pipeline and delays the server's start).
@@ -41,6 +41,17 @@ SEQUENCES = {0: "root", 1: "S1", 2: "S2", 3: "S3", 5: "gaps", 6: "parts"}
 #: Bytes of tile labels (``labels/parts``) kept between requests.
 PARTS_CACHE_BYTES = 320 << 20
 _LABEL_FIELDS = ("index", "class", "instance", "segment", "score")
+
+
+def tile_parts(records: dict[str, dict[str, Any]], tile: int) -> list[str]:
+    """The groups of a tile's label parts, in order, from the ``labels_tiles`` records of
+    its row slices (``pipeline.labels``: ``labels/parts/<tile>/<slice>/<j>``), or of a store
+    labelled before the slices (one record a tile, ``labels/parts/<tile>/<j>``)."""
+    old = records.get(str(tile))
+    if old is not None and "slice" not in old:
+        return [f"labels/parts/{tile}/{j}" for j in range(len(old.get("parts", [])))]
+    units = sorted((v for v in records.values() if "slice" in v and int(v["tile"]) == tile), key=lambda v: int(v["slice"]))
+    return [f"labels/parts/{tile}/{v['slice']}/{j}" for v in units for j in range(len(v["parts"]))]
 
 
 class ViewStore:
@@ -73,7 +84,7 @@ class ViewStore:
         self.counts = counts
         tile_recs = self.store.records("labels_tiles")
         self.tiles = [int(t) for t in attrs["ingest"]["tiles"]]
-        self.n_parts = {t: len(tile_recs.get(str(t), {}).get("parts", [])) for t in self.tiles}
+        self.part_groups = {t: tile_parts(tile_recs, t) for t in self.tiles}
         # each tile's rows from its ingest record (one listing; on S3 one request a tile less),
         # else from its array's metadata
         ing, ih = self.store.records("ingest"), attrs["ingest"].get("params_hash")
@@ -126,9 +137,9 @@ class ViewStore:
                     self._parts.move_to_end(t)
                     return self._parts[t]
             parts: dict[str, list[np.ndarray]] = {k: [] for k in _LABEL_FIELDS}
-            for j in range(self.n_parts[t]):
+            for group in self.part_groups[t]:
                 for k in _LABEL_FIELDS:
-                    parts[k].append(self._read(f"labels/parts/{t}/{j}/{k}"))
+                    parts[k].append(self._read(f"{group}/{k}"))
             size = sum(a.nbytes for v in parts.values() for a in v)
             with self._lock:
                 self._parts[t] = parts

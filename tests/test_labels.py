@@ -517,3 +517,49 @@ def test_the_element_checks_decision_reaches_labels(tmp_path, scan):
                           tree=f"{{enabled: true, max_depth: 1, verify: true, verify_model: {path}}}")
         assert (checked["class"][elements] == int(want)).all()
         np.testing.assert_array_equal(checked["class"][~elements], off["class"][~elements])
+
+
+def test_tile_slices_give_the_labels_of_whole_tiles_and_resume_per_slice(tmp_path, scan, monkeypatch):
+    """A tile cut into row slices (labels.plan_slices, issue 44), each slice also labelling
+    the voxel-dropped points whose representative is among its rows, gives the labels of
+    one task per tile; a lost slice record redoes that slice alone, and records of another
+    plan of slices are all redone."""
+    import hollowtree.pipeline.labels as labels
+    from hollowtree.pipeline.export import _sample
+    from hollowtree.pipeline.graph import task_runner
+
+    ingest = "{tile_size: 50.0, voxel: 0.2}"
+    plan = labels.plan_slices
+    monkeypatch.setattr(labels, "plan_slices", lambda sizes: plan(sizes, above=1e9))  # one slice a tile
+    whole_store, whole = _run(tmp_path / "whole", scan, ingest=ingest)
+    assert all(k.endswith(".0") for k in whole_store.records("labels_tiles"))
+    monkeypatch.setattr(labels, "plan_slices", lambda sizes: [
+        (t, s, a, b) for t, (rows, _) in sorted(sizes.items())
+        for s, (a, b) in enumerate(zip([0, rows // 3, 2 * rows // 3], [rows // 3, 2 * rows // 3, rows], strict=True))])
+    store, sliced = _run(tmp_path / "sliced", scan, ingest=ingest)
+    recs = store.records("labels_tiles")
+    assert len(recs) == 3 * len(store.attrs["ingest"]["tiles"])
+    assert sum(r["n_points"] for r in recs.values()) == sum(r["n_points"] for r in whole_store.records("labels_tiles").values())
+    for k in LABEL_DTYPES:
+        np.testing.assert_array_equal(sliced[k], whole[k], err_msg=k)
+    _, cls = _sample(store, n_max=10**9)
+    np.testing.assert_array_equal(cls, _sample(whole_store, n_max=10**9)[1])
+
+    url = str(tmp_path / "sliced" / "s.zarr")
+    a = RunStore.open(url, mode="a")
+    a.clear_records("labels")  # as if interrupted before the ranges, with one slice lost
+    lost = sorted(recs)[1]
+    a.delete(f"records/labels_tiles/{lost}")
+    with task_runner("sync", progress=False) as run:
+        report = labels.run_labels(url, use_tree=False, runner=run)
+    assert (report.tiles_run, report.tiles_skipped) == (1, len(recs) - 1)
+    for k in LABEL_DTYPES:
+        np.testing.assert_array_equal(a.read_slice(f"labels/{k}"), whole[k], err_msg=k)
+    monkeypatch.setattr(labels, "plan_slices", lambda sizes: plan(sizes, above=1e9))  # another plan
+    with task_runner("sync", progress=False) as run:
+        report = labels.run_labels(url, use_tree=False, runner=run)
+    assert (report.tiles_run, report.tiles_skipped) == (len(whole_store.records("labels_tiles")), 0)
+    assert sorted(a.records("labels_tiles")) == sorted(whole_store.records("labels_tiles"))
+    assert not a.has(f"labels/parts/{sorted(a.attrs['ingest']['tiles'])[0]}/2")  # the old plan's parts are gone
+    for k in LABEL_DTYPES:
+        np.testing.assert_array_equal(a.read_slice(f"labels/{k}"), whole[k], err_msg=k)

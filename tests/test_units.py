@@ -1,6 +1,7 @@
 """Units balanced by points (issue 44): on a deliberately uneven scan, the coarse stage's
-blocks and the tree's batches hold no unit above ``UNIT_BALANCE`` times its wave's median
-(the tree's batches of an uneven spread of element groups: ``plan_batches`` below)."""
+blocks, the tree's batches and the labels stage's tile slices hold no unit above
+``UNIT_BALANCE`` times its wave's median (the tree's batches of an uneven spread of
+element groups: ``plan_batches`` below)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import pytest
 
 from hollowtree.pipeline.coarse import CoarseParams, balanced_block_points, run_coarse
 from hollowtree.pipeline.graph import task_runner
+from hollowtree.pipeline.labels import run_labels
 from hollowtree.pipeline.timing import UNIT_BALANCE, WAVES, balance, waves
 from hollowtree.pipeline.tree_stage import TreeStageParams, plan_batches, run_tree
 from hollowtree.scenes.synth import synth
@@ -28,6 +30,7 @@ def uneven(tmp_path_factory) -> Path:
         ingest([str(d / "m.laz")], str(store), IngestParams(tile_size=20.0, buffer=2.0), runner=run)
         run_coarse(str(store), CoarseParams(eps=0.3, block_points=20_000), runner=run)
         run_tree(str(store), TreeStageParams(batch_points=2_000), runner=run)
+        run_labels(str(store), use_tree=True, runner=run)
     return store
 
 
@@ -36,11 +39,12 @@ def _ratios(store: Path) -> dict[str, float | None]:
     return {f"{w.stage}.{w.name}": balance(w.points) for w in waves({n: s.records(n) for _, _, n in WAVES})}
 
 
-def test_coarse_blocks_and_tree_batches_are_balanced_by_points(uneven):
+def test_coarse_blocks_tree_batches_and_label_slices_are_balanced_by_points(uneven):
     ratios = _ratios(uneven)
     assert ratios["ingest.tiles"] > 3 * UNIT_BALANCE  # the scan is uneven
     assert ratios["coarse.tiles"] <= UNIT_BALANCE
     assert ratios["tree.batches"] <= UNIT_BALANCE
+    assert ratios["labels.tiles"] <= UNIT_BALANCE
 
 
 def test_alike_tiles_keep_block_points_and_one_large_group_stays_alone():

@@ -328,7 +328,9 @@ def test_a_tree_node_in_the_outline_highlights_its_points(page):
     key = pg.get_attribute("#tree > li", "data-key")
     tree, node = (int(k) for k in key.split("/"))
     sub = pg.evaluate(f"fetch('/api/subtree?tree={tree}&node={node}').then(r => r.json())")
+    pg.keyboard.press("Escape")  # no highlight left by an earlier test's pick: wait for this node's
     pg.click("#tree > li > .lab")
+    pg.wait_for_selector("#tree > li > .lab.on", timeout=10_000)
     pg.wait_for_function("window.hollowtreeViewer.highlightedCount() > 0", timeout=10_000)
     want = pg.evaluate("""s => window.hollowtreeViewer.batches.reduce((n, b) => {
         for (let i = 0; i < b.n; i++) if (s.segments.includes(b.segment[i]) && s.nodes.includes(b.leaf[i])) n++;
