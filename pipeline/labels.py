@@ -51,6 +51,7 @@ from hollowtree.pipeline.tree_stage import MERGE_CLASS_MAP, MERGE_MAP, ROWS
 from hollowtree.pipeline.view_store import tile_parts
 from hollowtree.primitives.terrain import smrf_ground
 from hollowtree.tiling.grid import TileGrid
+from hollowtree.tiling.ingest_plan import part_counts
 from hollowtree.tiling.stage import Stage, params_hash
 from hollowtree.tiling.store import CHUNK_POINTS, RunStore
 from hollowtree.tree.rows import ArcadeCells, apply_cells
@@ -246,12 +247,10 @@ def plan_slices(sizes: dict[int, tuple[int, int]], *, above: float = 2.0) -> lis
     >>> plan_slices({0: (10, 10), 1: (12, 10), 2: (50, 40), 3: (0, 0)})
     [(0, 0, 0, 10), (1, 0, 0, 12), (2, 0, 0, 12), (2, 1, 12, 25), (2, 2, 25, 37), (2, 3, 37, 50), (3, 0, 0, 0)]
     """
-    pts = sorted(p for _, p in sizes.values() if p > 0)
-    med = (pts[len(pts) // 2] if len(pts) % 2 else (pts[len(pts) // 2 - 1] + pts[len(pts) // 2]) / 2) if pts else 0
+    counts = part_counts({t: p for t, (_, p) in sizes.items()}, above=above, cap={t: r for t, (r, _) in sizes.items()})
     out = []
     for t in sorted(sizes):
-        rows, points = sizes[t]
-        k = min(-(-int(points) // int(med)), max(rows, 1)) if med and points > above * med else 1
+        rows, k = sizes[t][0], counts[t]
         cuts = [i * rows // k for i in range(k + 1)]
         out += [(t, s, cuts[s], cuts[s + 1]) for s in range(k)]
     return out

@@ -27,12 +27,15 @@ __all__ = ["UNIT_BALANCE", "WAVES", "Wave", "balance", "lpt_makespan", "predict_
 #: wave (issue 44): the coarse stage's blocks and the tree's batches are sized for it.
 UNIT_BALANCE = 3.0
 
-#: ``(stage, wave, record stage)`` in the order a run makes them. The coarse stage's
+#: ``(stage, wave, record stage)`` in the order a run makes them. A dense tile's ingest
+#: parts run beside the whole tiles, its copy units after them. The coarse stage's
 #: ``coarse`` records are two waves: a tile segmented whole (``n_blocks`` 1) runs beside
 #: the blocks of the big tiles, a big tile's join after them.
 WAVES = (
     ("ingest", "map", "ingest.map"),
     ("ingest", "tiles", "ingest"),
+    ("ingest", "tiles", "ingest.parts"),
+    ("ingest", "copies", "ingest.copies"),
     ("coarse", "plan", "coarse.plan"),
     ("coarse", "tiles", "coarse.blocks"),
     ("coarse", "tiles", "coarse"),

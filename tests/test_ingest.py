@@ -41,6 +41,15 @@ def _tiles(store_path) -> dict[int, dict[str, np.ndarray]]:
     return {int(t): store.read_unit(f"tiles/{t}") for t in recs}
 
 
+def _assert_same_tiles(path_a, path_b) -> None:
+    a, b = _tiles(path_a), _tiles(path_b)
+    assert a.keys() == b.keys()
+    for t in a:
+        assert a[t].keys() == b[t].keys()
+        for name in a[t]:
+            assert np.array_equal(a[t][name], b[t][name]), (t, name)
+
+
 def test_round_trip(scan_file, tmp_path):
     report = _ingest([scan_file], tmp_path / "s")
     las = laspy.read(scan_file)
@@ -206,12 +215,7 @@ def test_killed_ingest_resumes_to_the_same_store(scan_file, tmp_path):
     assert 0 < len(partial) < len(total)
     out = subprocess.run(_run_cli(scan_file, killed), check=True, capture_output=True, text=True)
     assert f"skipped {len(partial)}" in out.stdout
-    a, b = _tiles(ref), _tiles(killed)
-    assert a.keys() == b.keys()
-    for t in a:
-        assert a[t].keys() == b[t].keys()
-        for name in a[t]:
-            assert np.array_equal(a[t][name], b[t][name]), (t, name)
+    _assert_same_tiles(ref, killed)
     assert not list((killed / "fragments").glob("*.npz"))
 
 
@@ -222,11 +226,7 @@ def test_one_and_two_workers_give_the_same_store(scan_file, tmp_path):
         ingest([str(scan_file)], str(tmp_path / "one"), params, runner=run)
     with task_runner(None, workers=2, progress=False) as run:
         ingest([str(scan_file)], str(tmp_path / "two"), params, runner=run)
-    a, b = _tiles(tmp_path / "one"), _tiles(tmp_path / "two")
-    assert a.keys() == b.keys()
-    for t in a:
-        for name in a[t]:
-            assert np.array_equal(a[t][name], b[t][name])
+    _assert_same_tiles(tmp_path / "one", tmp_path / "two")
 
 
 def _fails(capsys, argv, needle):
@@ -402,3 +402,54 @@ def test_a_scan_in_degrees_is_one_line(scan_file, tmp_path, capsys):
     _fails(capsys, ["ingest", str(tmp_path / "deg.las"), "--store", str(tmp_path / "s"), "--scheduler", "sync",
                     "--no-progress"], "coordinates in degrees")
     assert not (tmp_path / "s").exists()
+
+
+def test_dense_tiles_are_reduced_in_parts_into_the_same_store(monkeypatch, scan_file, tmp_path):
+    """A tile above twice the median is reduced in parts of about a batch, then copied
+    into the tile in chunk-aligned units; an interrupted copy resumes; the tiles are the
+    ones a single unit per tile writes."""
+    from hollowtree.pipeline.timing import waves
+    from hollowtree.tiling import ingest as ing
+    from hollowtree.tiling import store as st
+
+    monkeypatch.setattr(ing, "FLUSH_ROWS", 1_500)
+    monkeypatch.setattr(ing, "CHUNK_POINTS", 1_024)
+    monkeypatch.setattr(st, "CHUNK_POINTS", 1_024)
+    params = IngestParams(tile_size=5.0, buffer=1.0, chunk_size=20_000, voxel=0.02)
+    whole, parts = tmp_path / "whole", tmp_path / "parts"
+    monkeypatch.setattr(ing, "SPLIT_ABOVE", float("inf"))
+    seen = []
+    with task_runner("sync", progress=False) as run:
+        ingest([str(scan_file)], str(whole), params, runner=run)
+
+        def dies_in_copy(fn, args, desc):  # half the copy units finish, then the run dies
+            if desc == "ingest: copy":
+                run(fn, args[: len(args) // 2], desc)
+                raise KeyboardInterrupt
+            return run(fn, args, desc)
+
+        def counting(fn, args, desc):
+            seen.append((desc, len(args)))
+            return run(fn, args, desc)
+
+        monkeypatch.setattr(ing, "SPLIT_ABOVE", 2.0)
+        with pytest.raises(KeyboardInterrupt):
+            ingest([str(scan_file)], str(parts), params, runner=dies_in_copy)
+        n_copied = len(RunStore.open(parts).records("ingest.copies"))
+        assert n_copied > 0
+        ingest([str(scan_file)], str(parts), params, runner=counting)
+    assert ("ingest: tiles", 0) in seen  # every part was kept
+    store = RunStore.open(parts)
+    recs = store.records("ingest")
+    split = {t: r["parts"] for t, r in recs.items() if "parts" in r}
+    assert max(split.values(), default=0) >= 3, split  # the test makes dense tiles
+    assert all("wall_s" not in recs[t] for t in split)  # timed by their units
+    copies = store.records("ingest.copies")
+    assert len(copies) > len(split)
+    assert ("ingest: copy", len(copies) - n_copied) in seen
+    _assert_same_tiles(whole, parts)
+    assert not store.has("ingest/parts")
+    # a part is about one batch: the dense tiles' units are cut to the batch size
+    tiles = next(w for w in waves({k: store.records(k) for k in ("ingest", "ingest.parts")}) if w.name == "tiles")
+    whole_tiles = [int(r["n_points"]) for r in RunStore.open(whole).records("ingest").values()]
+    assert max(tiles.points) <= 2 * 1_500 < max(whole_tiles) / 2, (tiles.points, whole_tiles)

@@ -7,7 +7,11 @@ Two phases of independent units, each unit a Dask task scheduled by ``pipeline/g
   convert coordinates to the store's integer grid, route every point to its core tile and
   to the tiles whose buffer holds it, and write one fragment per tile touched;
 - **reduce** (one unit per tile): gather the tile's fragments, sort the points in Morton
-  order, optionally keep one representative per voxel, write the tile's arrays.
+  order, optionally keep one representative per voxel, write the tile's arrays. A tile
+  above twice the median tile's rows (a scan's density peaks around its stations) is
+  reduced in parts instead, runs of its batches written to ``ingest/parts/<tile>/<k>``
+  beside the other tiles' units, then copied into the tile's arrays by chunk-aligned
+  **copy** units: the same rows in the same order as one unit would write.
 
 Each unit writes its completion record after its data. Rerunning the same ingest skips
 recorded units; a different parameter on an existing store is refused. Peak memory is
@@ -35,6 +39,7 @@ from hollowtree.tiling.ingest_plan import (
     IngestPlan,
     MapUnit,
     auto_tile_size,
+    part_counts,
     plan_ingest,
 )
 from hollowtree.tiling.kernels import morton_index_order, quantise, route_groups, split_rows
@@ -43,7 +48,7 @@ from hollowtree.tiling.readers import (
     read_blocks,
 )
 from hollowtree.tiling.stage import Stage
-from hollowtree.tiling.store import RunStore, StoreError, check_writable
+from hollowtree.tiling.store import CHUNK_POINTS, RunStore, StoreError, check_writable
 
 __all__ = [
     "IngestParams",
@@ -60,6 +65,11 @@ __all__ = [
 
 STAGE = "ingest"
 MAP_STAGE = "ingest.map"
+PARTS_STAGE = "ingest.parts"
+COPY_STAGE = "ingest.copies"
+#: A tile above SPLIT_ABOVE times the median tile's rows is reduced in parts of about the
+#: median (at most one per batch), so no reduce unit is far above the median (issue 44).
+SPLIT_ABOVE = 2.0
 #: Fragments are sorted by SUBCELLS x SUBCELLS x-y sub-cells of their tile; the reduce phase
 #: gathers runs of sub-cells up to FLUSH_ROWS rows, so its memory follows that budget (or
 #: the densest sub-cell), not the tile: TLS density peaks sharply around each station.
@@ -214,22 +224,10 @@ def _packed_key(cols: Sequence[npt.NDArray[np.int64]]) -> npt.NDArray[np.int64] 
     return packed
 
 
-def reduce_tile(url: str, tile: int, keys: Sequence[str], plan_attrs: dict[str, Any]) -> int:
-    """Reduce task: gather a tile's fragments, Morton-sort, downsample, write, record.
-
-    Returns the number of points written to the tile.
-    """
-    store = RunStore.open(url, mode="a")
-    fields = plan_attrs["fields"]
-    scale = np.asarray(plan_attrs["coords"]["scale"])
-    grid = TileGrid.from_dict(plan_attrs["grid"])
-    params = plan_attrs["ingest"]["params"]
-    voxel = params.get("voxel")
-    dtype = _row_dtype(fields, bool(voxel))
-    # Each fragment is sorted by sub-cell. Consecutive sub-cells are gathered into batches
-    # of about FLUSH_ROWS rows (one read per fragment and batch), so memory follows the
-    # batch (or the densest single sub-cell), never the tile.
-    tables = {k: store.read_fragment_groups(k) for k in keys}  # (key, first row) + sentinel
+def tile_batches(tables: dict[str, npt.NDArray[np.int64]]) -> tuple[list[tuple[int, int]], int]:
+    """The reduce's batches of a tile, ``(first sub-cell, last sub-cell)`` each, from its
+    fragments' sub-cell tables: runs of consecutive sub-cells of at least FLUSH_ROWS rows
+    (the last run shorter); and the tile's rows."""
     totals: dict[int, int] = {}
     for groups in tables.values():
         for sub, n in zip(groups[:-1, 0].tolist(), np.diff(groups[:, 1]).tolist(), strict=True):
@@ -244,12 +242,40 @@ def reduce_tile(url: str, tile: int, keys: Sequence[str], plan_attrs: dict[str, 
             first, acc = None, 0
     if first is not None:
         batches.append((first, max(totals)))
+    return batches, sum(totals.values())
+
+
+def reduce_tile(url: str, tile: int, keys: Sequence[str], plan_attrs: dict[str, Any],
+                part: tuple[int, int] | None = None) -> int:
+    """Reduce task: gather a tile's fragments, Morton-sort, downsample, write, record.
+
+    ``part = (k, parts)``: only the k-th of ``parts`` runs of the tile's batches, written
+    to ``ingest/parts/<tile>/<k>`` and recorded as a part; :func:`copy_rows` then makes
+    the tile. Returns the number of points written.
+    """
+    store = RunStore.open(url, mode="a")
+    fields = plan_attrs["fields"]
+    scale = np.asarray(plan_attrs["coords"]["scale"])
+    grid = TileGrid.from_dict(plan_attrs["grid"])
+    params = plan_attrs["ingest"]["params"]
+    voxel = params.get("voxel")
+    dtype = _row_dtype(fields, bool(voxel))
+    # Each fragment is sorted by sub-cell. Consecutive sub-cells are gathered into batches
+    # of about FLUSH_ROWS rows (one read per fragment and batch), so memory follows the
+    # batch (or the densest single sub-cell), never the tile.
+    tables = {k: store.read_fragment_groups(k) for k in keys}  # (key, first row) + sentinel
+    batches, total = tile_batches(tables)
+    if part is not None:  # the part's run of batches, its rows to its own group
+        k, n_parts = part
+        batches = [b for i, b in enumerate(batches) if i * n_parts // len(batches) == k]
+        total = None
     x0, y0, _, _ = grid.buffered_bounds(tile)
     offset = np.asarray(plan_attrs["coords"]["offset"])
     cell = max(1.0, round(0.01 / float(scale.min())))  # 1 cm Morton cells
     names = ["xyz", "index", "core", *fields]
     # Without voxels the tile's length is known: its arrays are made once at full size.
-    writer = store.unit_writer(f"tiles/{tile}", n_rows=None if voxel else sum(totals.values()))
+    group = f"tiles/{tile}" if part is None else f"ingest/parts/{tile}/{part[0]}"
+    writer = store.unit_writer(group, n_rows=None if voxel else total)
     n_points = n_core = 0
     # One batch is encoded and written (Blosc and file writes release the GIL) while the
     # next is read and sorted: a dense tile's reduce then uses two cores, not one.
@@ -269,13 +295,38 @@ def reduce_tile(url: str, tile: int, keys: Sequence[str], plan_attrs: dict[str, 
     writer.close({**{n: empty[n] for n in names},
                   **({"voxel_dropped": np.zeros(0, np.uint64), "voxel_representative": np.zeros(0, np.uint64)}
                      if voxel else {})})
-    store.record(STAGE, str(tile), {
-        "params_hash": plan_attrs["ingest"]["params_hash"],
-        "n_points": n_points,
-        "n_core": n_core,
-    })
+    info = {"params_hash": plan_attrs["ingest"]["params_hash"], "n_points": n_points, "n_core": n_core}
+    if part is not None:  # the fragments stay until the tile is whole
+        n_vox = store.array_length(f"{group}/voxel_dropped") if voxel else 0
+        store.record(PARTS_STAGE, f"{tile}.{part[0]}", {**info, "parts": part[1], "n_voxel": n_vox})
+        return n_points
+    store.record(STAGE, str(tile), info)
     store.delete_fragments(keys)
     return n_points
+
+
+def copy_rows(url: str, tile: int, unit: int, spans: Sequence[tuple[Sequence[str], int, int, Sequence[int]]],
+              info: dict[str, Any]) -> int:
+    """Copy task: rows ``[first, end)`` of the arrays ``names`` of a tile reduced in parts,
+    for every ``(names, first, end, part lengths)`` of ``spans``, from the parts into the
+    tile's arrays (made at full length by the driver; ``first`` on a chunk boundary, so
+    no two copy units share a chunk). Returns the rows copied.
+    """
+    store = RunStore.open(url, mode="a")
+    n = 0
+    for names, first, end, lengths in spans:
+        starts = np.r_[0, np.cumsum(lengths)]
+        for name in names:
+            pieces = []
+            for k in range(len(lengths)):
+                a, b = max(first, int(starts[k])), min(end, int(starts[k + 1]))
+                if a < b:
+                    pieces.append(store.read_slice(f"ingest/parts/{tile}/{k}/{name}", a - int(starts[k]), b - int(starts[k])))
+            if pieces:
+                store.write_slice(f"tiles/{tile}/{name}", first, np.concatenate(pieces))
+        n += end - first
+    store.record(COPY_STAGE, f"{tile}.{unit}", {**info, "n_points": n})
+    return n
 
 
 def _reduce_batch(
@@ -318,6 +369,57 @@ def _reduce_batch(
     # Morton order, equal codes by original index: independent of fragment order
     perm = perm[morton_index_order(xyz, index, origin=origin, cell=cell)]
     return split_rows(rows, names, perm), extra
+
+
+def _ceil(a: int, b: int) -> int:
+    return -(-a // b)
+
+
+def _join_parts(store: RunStore, tiles: Sequence[int], n_parts: dict[int, int], keys: dict[int, list[str]],
+                h: str, runner: Runner) -> None:
+    """Make the tiles reduced in parts: their arrays at full length, then copy units of
+    about the median part's rows (whole chunks), then each tile's record (its units hold
+    the timing) with its parts and fragments removed."""
+    if not tiles:
+        return
+    stage = Stage(store, STAGE, h)
+    recs = stage.done(PARTS_STAGE)
+    parts = {t: [recs[f"{t}.{k}"] for k in range(n_parts[t])] for t in tiles}
+    sizes = [int(r["n_points"]) for t in tiles for r in parts[t] if int(r["n_points"]) > 0]
+    step = max(1, round(float(np.median(sizes)) / CHUNK_POINTS)) * CHUNK_POINTS if sizes else CHUNK_POINTS
+    copied = stage.done(COPY_STAGE)
+    units = []
+    for t in tiles:
+        plan = [n_parts[t], step]
+        done = {u for u, v in copied.items() if v.get("tile") == t and v.get("plan") == plan}
+        base = f"ingest/parts/{t}/0"
+        names = store.unit_arrays(base)
+        families = [[n for n in names if not n.startswith("voxel_")], [n for n in names if n.startswith("voxel_")]]
+        lengths = [[int(r["n_points"]) for r in parts[t]], [int(r.get("n_voxel", 0)) for r in parts[t]]]
+        n_units = max(1, _ceil(sum(lengths[0]), step))
+        if not done:  # else the recorded copy units' chunks are kept
+            for fam, lens in zip(families, lengths, strict=True):
+                for n in fam:
+                    empty = store.read_slice(f"{base}/{n}", 0, 0)
+                    store.create_array(f"tiles/{t}/{n}", shape=(sum(lens), *empty.shape[1:]), dtype=empty.dtype,
+                                       chunks=CHUNK_POINTS)
+        for j in range(n_units):
+            spans = []
+            for fam, lens in zip(families, lengths, strict=True):
+                width = _ceil(_ceil(sum(lens), n_units), CHUNK_POINTS) * CHUNK_POINTS  # whole chunks per unit
+                first, end = j * width, min((j + 1) * width, sum(lens))
+                if fam and first < end:
+                    spans.append((fam, first, end, lens))
+            if f"{t}.{j}" not in done:
+                units.append((store.url, t, j, spans, {"params_hash": h, "tile": t, "plan": plan}))
+    runner(copy_rows, units, "ingest: copy")
+    for t in tiles:
+        store.record(STAGE, str(t), {"params_hash": h, "n_points": sum(int(r["n_points"]) for r in parts[t]),
+                                     "n_core": sum(int(r["n_core"]) for r in parts[t]), "parts": n_parts[t]},
+                     timed=False)
+        store.delete_fragments(keys[t])
+        store.delete(f"ingest/parts/{t}")
+    store.delete("ingest/parts")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -434,8 +536,15 @@ def ingest(
         for t, n in counts.items():
             if int(t) in rows_of:
                 rows_of[int(t)] += int(n)
-    todo_tiles = sorted((t for t in plan.tiles if str(t) not in done_tiles), key=lambda t: (-rows_of[t], t))
-    runner(reduce_tile, [(url, t, keys[t], attrs) for t in todo_tiles], "ingest: tiles")
+    todo_tiles = [t for t in plan.tiles if str(t) not in done_tiles]
+    n_parts = part_counts(rows_of, above=SPLIT_ABOVE, cap={t: max(1, _ceil(n, FLUSH_ROWS)) for t, n in rows_of.items()})
+    done_parts = stage.done(PARTS_STAGE)
+    units = [(url, t, keys[t], attrs) if n_parts[t] == 1 else (url, t, keys[t], attrs, (k, n_parts[t]))
+             for t in todo_tiles for k in range(n_parts[t])
+             if n_parts[t] == 1 or done_parts.get(f"{t}.{k}", {}).get("parts") != n_parts[t]]
+    units.sort(key=lambda u: (-rows_of[u[1]] / n_parts[u[1]], u[1]))
+    runner(reduce_tile, units, "ingest: tiles")
+    _join_parts(store, [t for t in todo_tiles if n_parts[t] > 1], n_parts, keys, h, runner)
     store.delete_fragments()
 
     maps = store.records(MAP_STAGE)

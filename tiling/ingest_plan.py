@@ -24,7 +24,8 @@ from hollowtree.tiling.readers import (
 )
 from hollowtree.tiling.stage import params_hash
 
-__all__ = ["IngestParams", "IngestPlan", "MapUnit", "SURFACE_PER_FOOTPRINT", "auto_tile_size", "plan_ingest"]
+__all__ = ["IngestParams", "IngestPlan", "MapUnit", "SURFACE_PER_FOOTPRINT", "auto_tile_size", "part_counts",
+           "plan_ingest"]
 
 #: Coordinate resolution for inputs that store floats (PLY, E57): 0.1 mm.
 FLOAT_SOURCE_SCALE = 0.0001
@@ -109,6 +110,25 @@ def auto_tile_size(width: float, depth: float, n_points: int, *, tile_points: in
     while side <= 2 * buffer:
         side += 5.0
     return side
+
+
+def part_counts(points: dict[int, int], *, above: float = 2.0, cap: dict[int, int] | None = None) -> dict[int, int]:
+    """How many parts each unit of a wave is cut into (issue 44's balance): a unit above
+    ``above`` times the median unit's points (units without points left out of the median)
+    into ``ceil(points / median)``, at most ``cap[unit]`` (and at least 1); the others 1.
+    The ingest's dense tiles and the labels' tiles are cut this way.
+
+    >>> part_counts({0: 10, 1: 10, 2: 40, 3: 0}), part_counts({0: 10, 1: 10, 2: 40}, cap={2: 3})
+    ({0: 1, 1: 1, 2: 4, 3: 1}, {0: 1, 1: 1, 2: 3})
+    """
+    pts = sorted(p for p in points.values() if p > 0)
+    n = len(pts)
+    med = (pts[n // 2] if n % 2 else (pts[n // 2 - 1] + pts[n // 2]) / 2) if pts else 0
+    out = {}
+    for t, p in points.items():
+        k = -(-int(p) // int(med)) if med and p > above * med else 1
+        out[t] = max(1, min(k, cap[t])) if cap is not None and t in cap else k
+    return out
 
 
 def _source_bounds(info: SourceInfo, chunk_size: int) -> tuple[np.ndarray, np.ndarray]:

@@ -423,16 +423,17 @@ class RunStore:
                 fs.rm(path)
 
     # ------------------------------------------------------------------ records
-    def record(self, stage: str, unit: str, info: Mapping[str, Any]) -> None:
+    def record(self, stage: str, unit: str, info: Mapping[str, Any], *, timed: bool = True) -> None:
         """Record unit ``unit`` of ``stage`` as done. Call only after its data is written.
 
         The record also holds where and how long the unit ran, unless ``info`` says so
-        itself: ``wall_s`` and ``cpu_s`` (the seconds since this handle was opened or last
+        itself or ``timed`` is False (a record the driver writes for work its tasks did):
+        ``wall_s`` and ``cpu_s`` (the seconds since this handle was opened or last
         recorded a unit; CPU seconds of the process, whose own pool threads count with
         it), ``worker`` (host and process id) and ``finished`` (Unix time).
         """
         wall0, cpu0, pid = self._clock
-        timing = {"wall_s": round(time.perf_counter() - wall0, 4),
+        timing = {} if not timed else {"wall_s": round(time.perf_counter() - wall0, 4),
                   # a forked child's CPU time starts at zero
                   "cpu_s": round(time.process_time() - (cpu0 if pid == os.getpid() else 0.0), 4),
                   "worker": f"{socket.gethostname()}:{os.getpid()}", "finished": round(time.time(), 3)}
