@@ -28,7 +28,7 @@ import numpy as np
 import pyarrow as pa
 
 from hollowtree.errors import ConfigError, PipelineError
-from hollowtree.pipeline.coarse_stitch import READ_ROWS, stitch
+from hollowtree.pipeline.coarse_stitch import READ_ROWS, STITCH_STAGES, EdgeRows, stitch
 from hollowtree.pipeline.graph import in_child
 from hollowtree.pipeline.timing import UNIT_BALANCE, balance
 from hollowtree.primitives.dbscan import window_spacing
@@ -148,7 +148,8 @@ def _tile_summary(store: RunStore, tile: int, segment: np.ndarray, n_segments: i
                   offset: np.ndarray, params: CoarseParams
                   ) -> tuple[dict[str, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray] | None]:
     """Per segment ``1..n_segments`` of a tile: points, core points, lowest core index and
-    world bounding box; and the contacts between its segments (``group_gap > 0``).
+    world bounding box; and the contacts between its segments (``group_gap > 0``). Writes
+    the tile's edge rows for the stitch (``coarse/edges/<tile>``, ``EdgeRows``).
 
     The tile's points are read ``READ_ROWS`` rows at a time, so memory follows that
     and the segments, not the tile (a dense tile near a station holds millions of points).
@@ -162,6 +163,7 @@ def _tile_summary(store: RunStore, tile: int, segment: np.ndarray, n_segments: i
     lo = np.full((m, 3), np.iinfo(np.int64).max, dtype=np.int64)
     hi = np.full((m, 3), np.iinfo(np.int64).min, dtype=np.int64)
     n = len(segment)
+    edges = EdgeRows(store, tile)
 
     def chunks() -> Iterator[tuple[np.ndarray, np.ndarray]]:
         for start in range(0, n, READ_ROWS):
@@ -173,6 +175,7 @@ def _tile_summary(store: RunStore, tile: int, segment: np.ndarray, n_segments: i
             n_pts[:] += np.bincount(seg, minlength=m)
             n_core[:] += np.bincount(seg[core], minlength=m)
             np.minimum.at(min_index, seg[core], index[core])
+            edges.add(raw, core, index, seg)
             for j in range(3):
                 col = raw[:, j].astype(np.int64)
                 np.minimum.at(lo[:, j], seg, col)
@@ -193,6 +196,7 @@ def _tile_summary(store: RunStore, tile: int, segment: np.ndarray, n_segments: i
              "min_index": np.where(n_core[sid] > 0, min_index[sid], -1),
              "xmin": world_lo[:, 0], "ymin": world_lo[:, 1], "zmin": world_lo[:, 2],
              "xmax": world_hi[:, 0], "ymax": world_hi[:, 1], "zmax": world_hi[:, 2]}
+    store.write_unit(f"coarse/edges/{tile}", edges.arrays())  # for the stitch
     return table, contacts
 
 
@@ -431,7 +435,7 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     cfg = {"params": params.to_dict(), "eps": float(eps), "algorithm": COARSE_ALGORITHM}
     h = params_hash([cfg, attrs["ingest"]["params_hash"]])
     cfg["params_hash"] = h
-    stage = Stage(store, STAGE, h, unit_stages=(BLOCK_STAGE, PLAN_STAGE))
+    stage = Stage(store, STAGE, h, unit_stages=(BLOCK_STAGE, PLAN_STAGE, *STITCH_STAGES))
     previous = stage.last
     stage.clear_if_changed()  # other parameters: every tile is redone
     done = set(stage.done())
@@ -459,7 +463,7 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     if not todo and previous.get("params_hash") == h and "n_tile_segments" in previous:
         n_segments, n_keys = int(previous["n_segments"]), int(previous["n_tile_segments"])  # stitched before
     else:
-        n_segments, n_keys = stitch(store, tiles, params)
+        n_segments, n_keys = stitch(store, tiles, params, runner=runner, h=h)
     t_stitch = time.perf_counter() - t_stitch
     recs = store.records(STAGE)
     stage.finish(len(tiles), eps=float(eps), spacing=spacing, params=params.to_dict(), n_segments=n_segments,

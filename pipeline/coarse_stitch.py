@@ -1,7 +1,19 @@
 """The coarse stage's stitch: tile-local segments joined into global ones across tile
 borders, then into element groups for the tree (``pipeline/coarse.py`` runs it once,
 after every tile is recorded). It writes ``coarse/segments.parquet``, the per-point
-global segment of every tile and the segments' CSR of original indices."""
+global segment of every tile and the segments' CSR of original indices.
+
+Three waves of tasks around a small reduction in the driver (issue 44: no serial middle):
+
+- **pairs** (a task per tile): the tile's buffer rows matched to the core rows of its 8
+  neighbours (the same original index), as counts per pair of tile-local segments;
+- the driver joins the pairs (union-find over the tables' segments, not points), makes the
+  element groups and the global ids, and counts each segment's points from the tables;
+- **parts** (a task per tile): its rows' global ids and CSR positions
+  (``coarse/tiles/<tile>/{global, csr_pos}``) and its CSR rows in CSR order
+  (``coarse/csr_parts/<tile>``);
+- **csr** (a task per run of whole CSR chunks): those rows gathered from the tiles' parts.
+"""
 
 from __future__ import annotations
 
@@ -28,12 +40,14 @@ from hollowtree.primitives.stitch import UnionFind
 from hollowtree.tiling.grid import TileGrid
 from hollowtree.tiling.store import CHUNK_POINTS, RunStore
 
-__all__ = ["READ_ROWS", "STITCH_CACHE_ROWS", "stitch"]
+__all__ = ["CSR_ROWS", "READ_ROWS", "STITCH_STAGES", "EdgeRows", "stitch"]
 
-#: Edge rows (16 bytes each) the stitch keeps of the tiles it matched last (least recently
-#: used dropped first): tiles are visited row by row, so a window of about three rows of
-#: tiles is reused; a bound, not a grow-with-the-scan cache.
-STITCH_CACHE_ROWS = 8_000_000
+PAIRS_STAGE = "coarse.pairs"
+PARTS_STAGE = "coarse.csr_parts"
+CSR_STAGE = "coarse.csr"
+STITCH_STAGES = (PAIRS_STAGE, PARTS_STAGE, CSR_STAGE)
+#: CSR rows a csr task gathers and writes (whole chunks, about 80 MB of index and xyz).
+CSR_ROWS = 16 * CHUNK_POINTS
 #: Tile rows read at a time by a tile's table and contacts (``pipeline.coarse``) and by the
 #: stitch: their memory follows this, not the densest tile. A multiple of the store's
 #: chunk, so the stitch writes whole chunks.
@@ -137,8 +151,181 @@ def _joined(parts: list[np.ndarray]) -> np.ndarray:
     return np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
 
 
-def stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tuple[int, int]:
-    """Join tile segments over shared buffer points; write global ids, table and CSR."""
+def _pieces(store: RunStore, t: int, names: Sequence[str]) -> Iterator[dict[str, np.ndarray]]:
+    """Tile ``t``'s rows ``READ_ROWS`` at a time: ``names`` of tiles/<t> and its segment."""
+    n = store.array_length(f"coarse/tiles/{t}/segment")
+    for start in range(0, n, READ_ROWS):
+        stop = min(start + READ_ROWS, n)
+        d = {k: store.read_slice(f"tiles/{t}/{k}", start, stop) for k in names}
+        d["segment"] = store.read_slice(f"coarse/tiles/{t}/segment", start, stop).astype(np.int64)
+        d["start"] = np.int64(start)
+        yield d
+
+
+class EdgeRows:
+    """What the stitch needs of a tile, gathered piece by piece: its segmented buffer rows
+    and the segmented core rows near its edge (the only ones a neighbour's buffer can
+    hold: within the buffer, and a little more, since rows were routed before their
+    coordinates were stored), each as original index and tile-local segment. The coarse
+    task fills it as it summarises its tile and writes it to ``coarse/edges/<tile>``."""
+
+    NAMES = ("buffer_index", "buffer_segment", "core_index", "core_segment")
+
+    def __init__(self, store: RunStore, tile: int) -> None:
+        grid = TileGrid.from_dict(store.attrs["grid"])
+        self.scale = np.asarray(store.attrs["coords"]["scale"], dtype=np.float64)
+        self.offset = np.asarray(store.attrs["coords"]["offset"], dtype=np.float64)
+        self.bounds = grid.core_bounds(tile)
+        self.reach = float(grid.buffer) + 10.0 * float(self.scale[:2].max())
+        self.parts: dict[str, list[np.ndarray]] = {k: [] for k in self.NAMES}
+
+    def add(self, raw: np.ndarray, core: np.ndarray, index: np.ndarray, seg: np.ndarray) -> None:
+        """One piece of the tile's rows: stored xyz, core flag, original index, segment."""
+        x0, y0, x1, y1 = self.bounds
+        xy = raw[:, :2].astype(np.float64) * self.scale[:2] + self.offset[:2]
+        edge = ((xy[:, 0] < x0 + self.reach) | (xy[:, 0] > x1 - self.reach)
+                | (xy[:, 1] < y0 + self.reach) | (xy[:, 1] > y1 - self.reach))
+        core = core.astype(bool)
+        for m, name in ((~core & (seg > 0), "buffer"), (core & (seg > 0) & edge, "core")):
+            self.parts[f"{name}_index"].append(index[m].astype(np.int64))
+            self.parts[f"{name}_segment"].append(seg[m].astype(np.int64))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The four arrays, each kind of rows sorted by original index (matched by a
+        binary search of sorted keys)."""
+        out = {k: _joined(v) for k, v in self.parts.items()}
+        for kind in ("buffer", "core"):
+            order = np.argsort(out[f"{kind}_index"])
+            out[f"{kind}_index"], out[f"{kind}_segment"] = out[f"{kind}_index"][order], out[f"{kind}_segment"][order]
+        return out
+
+
+def _edges(store: RunStore, tile: int, rows: str) -> dict[str, np.ndarray]:
+    """A tile's ``rows`` (``buffer`` or ``core``) of its :class:`EdgeRows`, as its coarse
+    task wrote them (or, in a store whose coarse tasks did not, taken from the tile)."""
+    if store.has(f"coarse/edges/{tile}"):
+        return store.read_unit(f"coarse/edges/{tile}", [f"{rows}_index", f"{rows}_segment"])
+    rows = EdgeRows(store, tile)
+    for d in _pieces(store, tile, ("xyz", "core", "index")):
+        rows.add(d["xyz"], d["core"], d["index"], d["segment"])
+    return rows.arrays()
+
+
+def stitch_pairs(url: str, tile: int, neighbours: Sequence[int], h: str) -> np.ndarray:
+    """Pairs task: ``(k, 5)`` int64 rows ``(tile, segment, neighbour, its segment, shared
+    points)``: the tile's segmented buffer rows found among the segmented edge core rows
+    of ``neighbours`` (every buffer row is a copy of one of their core rows)."""
+    store = RunStore.open(url, mode="a")
+    own = _edges(store, tile, "buffer")
+    b_idx, b_seg = own["buffer_index"], own["buffer_segment"]
+    out = [np.zeros((0, 5), dtype=np.int64)]
+    for n in neighbours if len(b_idx) else ():
+        other = _edges(store, n, "core")
+        c_idx, c_seg = other["core_index"], other["core_segment"]
+        if not len(c_idx):
+            continue
+        pos = np.minimum(np.searchsorted(c_idx, b_idx), len(c_idx) - 1)
+        hit = c_idx[pos] == b_idx
+        if not hit.any():
+            continue
+        sa, sb = b_seg[hit], c_seg[pos[hit]]
+        width = int(sb.max()) + 1
+        code = sa * width + sb
+        if (int(sa.max()) + 1) * width <= 4 * len(code) + 1_000_000:  # few local segments: a bincount
+            cnt = np.bincount(code)
+            pair = np.flatnonzero(cnt)
+            cnt = cnt[pair]
+        else:
+            pair, cnt = np.unique(code, return_counts=True)
+        out.append(np.column_stack([np.full(len(pair), tile), pair // width, np.full(len(pair), n), pair % width,
+                                    cnt]))
+    store.record(PAIRS_STAGE, str(tile), {"params_hash": h, "n_points": int(len(b_idx))})
+    return np.concatenate(out).astype(np.int64)
+
+
+def stitch_part(url: str, tile: int, lookup: np.ndarray, cursor: np.ndarray, h: str) -> int:
+    """Parts task: the global id (``lookup[local segment]`` of a core row, else 0) and
+    CSR position of every row of the tile; and its CSR rows (original index, store xyz)
+    in CSR order, at ``coarse/csr_parts/<tile>``. ``cursor``: ``(g, first position, first
+    part row)`` for each global segment the tile holds; a segment's rows of one tile are
+    consecutive in both, in row order. Returns the CSR rows written.
+
+    The part is filled through a disk-backed scratch file (positioned writes, not a memory
+    map, whose pages would count in the task's resident memory): the task holds
+    ``READ_ROWS`` rows at a time, not the tile.
+    """
+    store = RunStore.open(url, mode="a")
+    first = np.zeros(int(lookup.max(initial=0)) + 1, dtype=np.int64)
+    part_at = np.zeros(len(first), dtype=np.int64)
+    first[cursor[:, 0]], part_at[cursor[:, 0]] = cursor[:, 1], cursor[:, 2]
+    n_of = np.zeros(len(first), dtype=np.int64)
+    n_rows = store.array_length(f"coarse/tiles/{tile}/segment")
+    store.create_array(f"coarse/tiles/{tile}/global", shape=(n_rows,), dtype=np.uint64)
+    store.create_array(f"coarse/tiles/{tile}/csr_pos", shape=(n_rows,), dtype=np.int64)
+    written = 0
+    with tempfile.TemporaryFile() as scratch_i, tempfile.TemporaryFile() as scratch_x:
+        fd_i, fd_x = scratch_i.fileno(), scratch_x.fileno()
+        for d in _pieces(store, tile, ("core", "index", "xyz")):
+            seg = d["segment"]
+            top = int(seg.max(initial=0))
+            lut = lookup if top < len(lookup) else np.r_[lookup, np.zeros(top + 1 - len(lookup), np.int64)]
+            glob = np.where(d["core"].astype(bool), lut[seg], 0)
+            pos = np.full(len(glob), -1, dtype=np.int64)
+            rows = np.flatnonzero(glob > 0)
+            if len(rows):
+                g = glob[rows]
+                order = np.argsort(g, kind="stable")
+                rows, g = rows[order], g[order]
+                starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
+                rank = np.arange(len(g)) - np.repeat(starts, np.diff(np.r_[starts, len(g)])) + n_of[g]
+                pos[rows] = first[g] + rank
+                at = part_at[g] + rank
+                n_of[g[starts]] += np.diff(np.r_[starts, len(g)])
+                # runs of consecutive part rows: one positioned write each
+                brk = np.flatnonzero(np.r_[True, np.diff(at) != 1, True])
+                idx, xyz = d["index"][rows].astype(np.uint64), d["xyz"][rows].astype(np.int32)
+                for a, b in zip(brk[:-1].tolist(), brk[1:].tolist(), strict=True):
+                    _pwrite_all(fd_i, np.ascontiguousarray(idx[a:b]), int(at[a]) * 8)
+                    _pwrite_all(fd_x, np.ascontiguousarray(xyz[a:b]), int(at[a]) * 12)
+                written += len(rows)
+            store.write_slice(f"coarse/tiles/{tile}/global", int(d["start"]), glob.astype(np.uint64))
+            store.write_slice(f"coarse/tiles/{tile}/csr_pos", int(d["start"]), pos)
+        writer = store.unit_writer(f"coarse/csr_parts/{tile}", n_rows=written)
+        for a in range(0, written, READ_ROWS):
+            m = min(READ_ROWS, written - a)
+            writer.append({"indices": _pread_all(fd_i, m * 8, a * 8).view(np.uint64),
+                           "xyz": _pread_all(fd_x, m * 12, a * 12).view(np.int32).reshape(m, 3)})
+        writer.close({"indices": np.zeros(0, np.uint64), "xyz": np.zeros((0, 3), np.int32)})
+    store.record(PARTS_STAGE, str(tile), {"params_hash": h, "n_points": n_rows})
+    return written
+
+
+def stitch_csr(url: str, unit: int, first: int, end: int, blocks: np.ndarray, h: str) -> int:
+    """CSR task: CSR rows ``[first, end)`` (``first`` on a chunk boundary) from the tiles'
+    parts. ``blocks``: ``(tile, CSR position, part row, rows)`` of every run of a tile's
+    part rows in the range (a tile's runs are consecutive part rows: one read per tile)."""
+    store = RunStore.open(url, mode="a")
+    indices = np.zeros(end - first, dtype=np.uint64)
+    xyz = np.zeros((end - first, 3), dtype=np.int32)
+    for t in np.unique(blocks[:, 0]).tolist():
+        bt = blocks[blocks[:, 0] == t]
+        lo, hi = int(bt[:, 2].min()), int((bt[:, 2] + bt[:, 3]).max())
+        part_i = store.read_slice(f"coarse/csr_parts/{t}/indices", lo, hi)
+        part_x = store.read_slice(f"coarse/csr_parts/{t}/xyz", lo, hi)
+        for _, p, r, n in bt.tolist():
+            indices[p - first:p - first + n] = part_i[r - lo:r - lo + n]
+            xyz[p - first:p - first + n] = part_x[r - lo:r - lo + n]
+    store.write_slice("coarse/csr/indices", first, indices)
+    store.write_slice("coarse/csr/xyz", first, xyz)
+    store.record(CSR_STAGE, str(unit), {"params_hash": h, "n_points": end - first})
+    return end - first
+
+
+def stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams, *, runner: Any, h: str = "") -> tuple[int, int]:
+    """Join tile segments over shared buffer points; write global ids, table and CSR.
+
+    ``runner(fn, args_list, desc)`` runs the tasks (``pipeline.graph``); ``h`` is the
+    stage's hash, in the tasks' records."""
     grid = TileGrid.from_dict(store.attrs["grid"])
     tables = [store.read_table(f"coarse/tables/{t}.parquet").to_pylist() for t in tiles]
     keys = [(r["tile"], r["segment"]) for tab in tables for r in tab]
@@ -147,94 +334,43 @@ def stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tuple
     key_rows: dict[int, list[tuple[int, int]]] = {}
     for i, (tt, s_) in enumerate(keys):
         key_rows.setdefault(tt, []).append((s_, i))
-    uf = UnionFind(len(keys))
-    # Every buffer row of a tile is a copy of a core row of one of its 8 neighbours (the
-    # same original index). Match them tile pair by tile pair, so that the driver holds
-    # one tile's buffer rows and one neighbour's core rows at a time, never the scan.
-    present = set(tiles)
-    cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-    scale = np.asarray(store.attrs["coords"]["scale"], dtype=np.float64)
-    offset = np.asarray(store.attrs["coords"]["offset"], dtype=np.float64)
-    # A core row can be another tile's buffer row only within the buffer of its tile's
-    # edge (a little more: the rows were routed before their coordinates were stored).
-    reach = float(grid.buffer) + 10.0 * float(scale[:2].max())
-
-    def keys_of(t: int, seg: np.ndarray) -> np.ndarray:
-        rows = key_rows.get(t, [])
-        lut = np.full(max([int(seg.max(initial=0))] + [s_ for s_, _ in rows]) + 1, -1, dtype=np.int64)
+    key_lut: dict[int, np.ndarray] = {}
+    for tt, rows in key_rows.items():
+        key_lut[tt] = np.full(max(s_ for s_, _ in rows) + 1, -1, dtype=np.int64)
         for s_, i in rows:
-            lut[s_] = i
-        kid = lut[seg]
+            key_lut[tt][s_] = i
+    uf = UnionFind(len(keys))
+    present = set(tiles)
+    jobs = []
+    for t in tiles:
+        ix, iy = grid.tile_index(t)
+        near = [grid.tile_id(jx, jy) for jy in (iy - 1, iy, iy + 1) for jx in (ix - 1, ix, ix + 1)
+                if (jx, jy) != (ix, iy) and 0 <= jx < grid.shape[0] and 0 <= jy < grid.shape[1]]
+        jobs.append((store.url, t, [n for n in near if n in present], h))
+    found = runner(stitch_pairs, jobs, "coarse: stitch pairs")
+    pairs = np.concatenate([np.zeros((0, 5), np.int64), *found])
+
+    def key_of(tile_col: np.ndarray, seg_col: np.ndarray) -> np.ndarray:
+        kid = np.full(len(seg_col), -1, dtype=np.int64)
+        for tt in np.unique(tile_col).tolist():
+            m = tile_col == tt
+            lut = key_lut.get(tt, np.full(1, -1, dtype=np.int64))
+            sg = seg_col[m]
+            kid[m] = np.where(sg < len(lut), lut[np.minimum(sg, len(lut) - 1)], -1)
         if (kid < 0).any():
-            raise PipelineError(f"store {store.url}: tile {t} labels points with a segment its table lacks; "
+            bad = int(tile_col[np.flatnonzero(kid < 0)[0]])
+            raise PipelineError(f"store {store.url}: tile {bad} labels points with a segment its table lacks; "
                                 "rerun `hollowtree coarse`")
         return kid
 
-    def pieces(t: int, names: Sequence[str]) -> Iterator[dict[str, np.ndarray]]:
-        """Tile ``t``'s rows ``READ_ROWS`` at a time: ``names`` of tiles/<t> and its segment."""
-        n = store.array_length(f"coarse/tiles/{t}/segment")
-        for start in range(0, n, READ_ROWS):
-            stop = min(start + READ_ROWS, n)
-            d = {k: store.read_slice(f"tiles/{t}/{k}", start, stop) for k in names}
-            d["segment"] = store.read_slice(f"coarse/tiles/{t}/segment", start, stop)
-            d["start"] = np.int64(start)
-            yield d
-
-    def core_rows(t: int) -> tuple[np.ndarray, np.ndarray]:
-        """Original index (sorted) and key row of the segmented core rows of tile ``t``
-        near its edge (the only ones a neighbour's buffer can hold)."""
-        if t in cache:
-            cache[t] = cache.pop(t)  # most recently used last
-        else:
-            x0, y0, x1, y1 = grid.core_bounds(t)
-            idx_parts, key_parts = [], []
-            for d in pieces(t, ("core", "index", "xyz")):
-                xy = d["xyz"][:, :2].astype(np.float64) * scale[:2] + offset[:2]
-                edge = ((xy[:, 0] < x0 + reach) | (xy[:, 0] > x1 - reach)
-                        | (xy[:, 1] < y0 + reach) | (xy[:, 1] > y1 - reach))
-                m = d["core"].astype(bool) & (d["segment"] > 0) & edge
-                idx_parts.append(d["index"][m].astype(np.int64))
-                key_parts.append(keys_of(t, d["segment"][m]))
-            idx, key = _joined(idx_parts), _joined(key_parts)
-            order = np.argsort(idx)
-            cache[t] = idx[order], key[order]
-            while len(cache) > 1 and sum(len(v[0]) for v in cache.values()) > STITCH_CACHE_ROWS:
-                cache.pop(next(iter(cache)))  # least recently used
-        return cache[t]
-
     pair_counts: dict[tuple[int, int], int] = {}
-    for t in tiles:
-        b_parts, k_parts = [], []
-        for d in pieces(t, ("core", "index")):
-            m = ~d["core"].astype(bool) & (d["segment"] > 0)
-            b_parts.append(d["index"][m].astype(np.int64))
-            k_parts.append(keys_of(t, d["segment"][m]))
-        b_idx, b_key = _joined(b_parts), _joined(k_parts)
-        if not len(b_idx):
-            continue
-        ix, iy = grid.tile_index(t)
-        for jy in (iy - 1, iy, iy + 1):
-            for jx in (ix - 1, ix, ix + 1):
-                if (jx, jy) == (ix, iy) or not (0 <= jx < grid.shape[0] and 0 <= jy < grid.shape[1]):
-                    continue
-                n = grid.tile_id(jx, jy)
-                if n not in present:
-                    continue
-                c_idx, c_key = core_rows(n)
-                if not len(c_idx):
-                    continue
-                pos = np.minimum(np.searchsorted(c_idx, b_idx), len(c_idx) - 1)
-                hit = c_idx[pos] == b_idx
-                if not hit.any():
-                    continue
-                ka, kb = b_key[hit], c_key[pos[hit]]
-                lo, hi = np.minimum(ka, kb), np.maximum(ka, kb)
-                code = lo * len(keys) + hi
-                u, cnt = np.unique(code[lo != hi], return_counts=True)
-                for c_, n_ in zip(u.tolist(), cnt.tolist(), strict=True):
-                    k2 = (c_ // len(keys), c_ % len(keys))
-                    pair_counts[k2] = pair_counts.get(k2, 0) + n_
-    cache.clear()
+    if len(pairs):
+        ka, kb = key_of(pairs[:, 0], pairs[:, 1]), key_of(pairs[:, 2], pairs[:, 3])
+        lo, hi = np.minimum(ka, kb), np.maximum(ka, kb)
+        code, inv = np.unique(lo * len(keys) + hi, return_inverse=True)
+        cnt = np.bincount(inv, weights=pairs[:, 4]).astype(np.int64)
+        pair_counts = {(int(c_ // len(keys)), int(c_ % len(keys))): int(n_)
+                       for c_, n_ in zip(code.tolist(), cnt.tolist(), strict=True)}
     sel = [(i, j) for (i, j), n in sorted(pair_counts.items())
            if n >= 3 and same_primitive(info[keys[i]], info[keys[j]], params)]
     if sel:
@@ -269,74 +405,44 @@ def stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams) -> tuple
         gm = np.array([gmin for gmin, _, _ in live], dtype=np.int64)
         group_of_segment[1:] = np.cumsum(np.r_[True, gm[1:] != gm[:-1]])
 
-    # Per tile: the global id of every core row; counts per global segment for the CSR.
-    by_tile: dict[int, list[tuple[int, int]]] = {}
-    for (tt, s_), g in zip(keys, key_global.tolist(), strict=True):
-        by_tile.setdefault(tt, []).append((s_, g))
-    local_to_global: dict[int, np.ndarray] = {}
-    for tt, members_tt in by_tile.items():
-        lookup = np.zeros(max(s_ for s_, _ in members_tt) + 1, dtype=np.int64)
-        for s_, g in members_tt:
-            lookup[s_] = g
-        local_to_global[tt] = lookup
-
-    def tile_global(t: int, d: dict[str, np.ndarray]) -> np.ndarray:
-        seg = d["segment"].astype(np.int64)
-        lookup = local_to_global.get(t, np.zeros(1, dtype=np.int64))
-        top = int(seg.max(initial=0))
-        if top >= len(lookup):  # a segment without a table row: no global id
-            lookup = np.r_[lookup, np.zeros(top + 1 - len(lookup), dtype=np.int64)]
-        return np.where(d["core"].astype(bool), lookup[seg], 0)
-
-    counts = np.zeros(n_segments + 1, dtype=np.int64)
-    for t in tiles:
-        for d in pieces(t, ("core",)):
-            counts += np.bincount(tile_global(t, d), minlength=n_segments + 1)
-    # The CSR (original index and store xyz of every core point, grouped by global
-    # segment) is filled through disk-backed scratch arrays, so the driver never holds
-    # the scan in memory. Each tile also keeps the CSR position of its core rows. Rows
-    # are taken READ_ROWS at a time, in order: within a global segment a tile's rows get
-    # consecutive positions in row order, as a stable sort of the whole tile would give.
+    # Each global segment's core points per tile, from the tables (their n_core counts the
+    # tile's core rows of each segment); a tile's rows of one segment are consecutive in
+    # the CSR, tiles in order, rows in row order.
+    key_tile = np.array([k[0] for k in keys], dtype=np.int64)
+    key_core = np.array([info[k]["n_core"] for k in keys], dtype=np.int64)
+    counts = np.bincount(key_global, weights=key_core, minlength=n_segments + 1).astype(np.int64)
     offsets = np.r_[0, np.cumsum(counts[1:])].astype(np.int64)
     total = int(offsets[-1])
-    with tempfile.TemporaryFile() as scratch_i, tempfile.TemporaryFile() as scratch_x:
-        # Positioned writes, not a memory map: mapped pages would count in the driver's
-        # resident memory and grow with the scan.
-        fd_i, fd_x = scratch_i.fileno(), scratch_x.fileno()
-        cursor = offsets[:-1].copy()
-        for t in tiles:
-            n_rows = store.array_length(f"coarse/tiles/{t}/segment")
-            store.create_array(f"coarse/tiles/{t}/global", shape=(n_rows,), dtype=np.uint64)
-            store.create_array(f"coarse/tiles/{t}/csr_pos", shape=(n_rows,), dtype=np.int64)
-            for d in pieces(t, ("core", "index", "xyz")):
-                glob = tile_global(t, d)
-                pos = np.full(len(glob), -1, dtype=np.int64)
-                rows = np.flatnonzero(glob > 0)
-                if len(rows):
-                    g = glob[rows]
-                    order = np.argsort(g, kind="stable")
-                    rows, g = rows[order], g[order]
-                    starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
-                    ends = np.r_[starts[1:], len(g)]
-                    for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
-                        gg = int(g[a]) - 1
-                        span = np.arange(cursor[gg], cursor[gg] + (b - a))
-                        pos[rows[a:b]] = span
-                        _pwrite_all(fd_i, np.ascontiguousarray(d["index"][rows[a:b]], dtype=np.uint64),
-                                    int(span[0]) * 8)
-                        _pwrite_all(fd_x, np.ascontiguousarray(d["xyz"][rows[a:b]], dtype=np.int32),
-                                    int(span[0]) * 12)
-                        cursor[gg] += b - a
-                store.write_slice(f"coarse/tiles/{t}/global", int(d["start"]), glob.astype(np.uint64))
-                store.write_slice(f"coarse/tiles/{t}/csr_pos", int(d["start"]), pos)
-        store.write_unit("coarse/csr", {"offsets": offsets})
-        store.create_array("coarse/csr/indices", shape=(total,), dtype=np.uint64)
-        store.create_array("coarse/csr/xyz", shape=(total, 3), dtype=np.int32)
-        step = 4 * CHUNK_POINTS  # whole chunks, a few tens of MB at a time
-        for a in range(0, total, step):
-            m = min(step, total - a)
-            store.write_slice("coarse/csr/indices", a, _pread_all(fd_i, m * 8, a * 8).view(np.uint64))
-            store.write_slice("coarse/csr/xyz", a, _pread_all(fd_x, m * 12, a * 12).view(np.int32).reshape(m, 3))
+    run = offsets[:-1].copy()
+    jobs, blocks = [], []
+    for t in tiles:
+        lookup = np.zeros(len(key_lut.get(t, [0])), dtype=np.int64)
+        for s_, i in key_rows.get(t, []):
+            lookup[s_] = key_global[i]
+        m = (key_tile == t) & (key_global > 0)
+        g, inv = np.unique(key_global[m], return_inverse=True)
+        n = np.bincount(inv, weights=key_core[m], minlength=len(g)).astype(np.int64)
+        g, n = g[n > 0], n[n > 0]
+        first = run[g - 1].copy()
+        run[g - 1] += n
+        jobs.append((store.url, t, lookup, np.stack([g, first, np.cumsum(n) - n], axis=1), h))
+        blocks.append(np.stack([np.full(len(g), t), first, np.cumsum(n) - n, n], axis=1))
+    runner(stitch_part, jobs, "coarse: stitch parts")
+    store.write_unit("coarse/csr", {"offsets": offsets})
+    store.create_array("coarse/csr/indices", shape=(total,), dtype=np.uint64)
+    store.create_array("coarse/csr/xyz", shape=(total, 3), dtype=np.int32)
+    allb = np.concatenate([np.zeros((0, 4), np.int64), *blocks]).astype(np.int64)
+    units = []
+    for j, lo in enumerate(range(0, total, CSR_ROWS)):
+        hi = min(lo + CSR_ROWS, total)
+        bl = allb[(allb[:, 1] < hi) & (allb[:, 1] + allb[:, 3] > lo)].copy()
+        start, end = np.maximum(bl[:, 1], lo), np.minimum(bl[:, 1] + bl[:, 3], hi)
+        bl[:, 2] += start - bl[:, 1]
+        bl[:, 1], bl[:, 3] = start, end - start
+        units.append((store.url, j, lo, hi, bl, h))
+    runner(stitch_csr, units, "coarse: csr")
+    store.delete("coarse/csr_parts")
+    store.delete("coarse/edges")
     # The global table: one row per global segment (the primitive of its largest member).
     members: dict[int, list[dict[str, Any]]] = {}
     for k, g in zip(keys, key_global.tolist(), strict=True):

@@ -20,7 +20,7 @@ from hollowtree.pipeline.tree_stage import group_starts
 from hollowtree.primitives.dbscan import window_spacing
 from hollowtree.scenes.synth import synth
 from hollowtree.tiling.ingest import IngestParams, ingest
-from hollowtree.tiling.store import RunStore
+from hollowtree.tiling.store import CHUNK_POINTS, RunStore
 
 PARAMS = CoarseParams(eps=0.3)
 
@@ -518,7 +518,9 @@ def test_stitch_reads_a_piece_at_a_time(tiled20, tmp_path, monkeypatch):
     whole = outputs()
     assert len(whole["indices"]) > 997  # type: ignore[arg-type]
     monkeypatch.setattr(coarse_stitch, "READ_ROWS", 997)
-    coarse_stitch.stitch(s, tiles, params)
+    monkeypatch.setattr(coarse_stitch, "CSR_ROWS", 2 * CHUNK_POINTS)  # several csr tasks
+    with task_runner("sync", progress=False) as run:
+        coarse_stitch.stitch(s, tiles, params, runner=run)
     pieces = outputs()
     assert pieces.keys() == whole.keys()
     for k, v in whole.items():
