@@ -38,6 +38,7 @@ from hollowtree.primitives.segment import (
 )
 from hollowtree.primitives.stitch import UnionFind
 from hollowtree.tiling.grid import TileGrid
+from hollowtree.tiling.ingest_plan import part_counts
 from hollowtree.tiling.store import CHUNK_POINTS, RunStore
 
 __all__ = ["CSR_ROWS", "READ_ROWS", "STITCH_STAGES", "EdgeRows", "stitch"]
@@ -48,6 +49,9 @@ CSR_STAGE = "coarse.csr"
 STITCH_STAGES = (PAIRS_STAGE, PARTS_STAGE, CSR_STAGE)
 #: CSR rows a csr task gathers and writes (whole chunks, about 80 MB of index and xyz).
 CSR_ROWS = 16 * CHUNK_POINTS
+#: A tile above UNIT_SPLIT times the median tile's rows (buffer rows for the pairs) is
+#: stitched in parts of about the median (issue 44's balanced units).
+UNIT_SPLIT = 2.0
 #: Tile rows read at a time by a tile's table and contacts (``pipeline.coarse``) and by the
 #: stitch: their memory follows this, not the densest tile. A multiple of the store's
 #: chunk, so the stitch writes whole chunks.
@@ -151,10 +155,12 @@ def _joined(parts: list[np.ndarray]) -> np.ndarray:
     return np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
 
 
-def _pieces(store: RunStore, t: int, names: Sequence[str]) -> Iterator[dict[str, np.ndarray]]:
-    """Tile ``t``'s rows ``READ_ROWS`` at a time: ``names`` of tiles/<t> and its segment."""
-    n = store.array_length(f"coarse/tiles/{t}/segment")
-    for start in range(0, n, READ_ROWS):
+def _pieces(store: RunStore, t: int, names: Sequence[str], rows: tuple[int, int] | None = None
+            ) -> Iterator[dict[str, np.ndarray]]:
+    """Tile ``t``'s rows (all, or ``rows = (first, end)``) ``READ_ROWS`` at a time:
+    ``names`` of tiles/<t> and its segment."""
+    first, n = rows if rows is not None else (0, store.array_length(f"coarse/tiles/{t}/segment"))
+    for start in range(first, n, READ_ROWS):
         stop = min(start + READ_ROWS, n)
         d = {k: store.read_slice(f"tiles/{t}/{k}", start, stop) for k in names}
         d["segment"] = store.read_slice(f"coarse/tiles/{t}/segment", start, stop).astype(np.int64)
@@ -170,6 +176,9 @@ class EdgeRows:
     task fills it as it summarises its tile and writes it to ``coarse/edges/<tile>``."""
 
     NAMES = ("buffer_index", "buffer_segment", "core_index", "core_segment")
+    #: and per piece of rows added: its rows, and its core rows per tile-local segment (the
+    #: stitch cuts a dense tile's CSR work at these pieces)
+    PIECES = ("piece_rows", "piece_core")
 
     def __init__(self, store: RunStore, tile: int) -> None:
         grid = TileGrid.from_dict(store.attrs["grid"])
@@ -178,6 +187,8 @@ class EdgeRows:
         self.bounds = grid.core_bounds(tile)
         self.reach = float(grid.buffer) + 10.0 * float(self.scale[:2].max())
         self.parts: dict[str, list[np.ndarray]] = {k: [] for k in self.NAMES}
+        self.piece_rows: list[int] = []
+        self.piece_core: list[np.ndarray] = []
 
     def add(self, raw: np.ndarray, core: np.ndarray, index: np.ndarray, seg: np.ndarray) -> None:
         """One piece of the tile's rows: stored xyz, core flag, original index, segment."""
@@ -186,17 +197,24 @@ class EdgeRows:
         edge = ((xy[:, 0] < x0 + self.reach) | (xy[:, 0] > x1 - self.reach)
                 | (xy[:, 1] < y0 + self.reach) | (xy[:, 1] > y1 - self.reach))
         core = core.astype(bool)
+        self.piece_rows.append(len(seg))
+        self.piece_core.append(np.bincount(seg[core].astype(np.int64)))
         for m, name in ((~core & (seg > 0), "buffer"), (core & (seg > 0) & edge, "core")):
             self.parts[f"{name}_index"].append(index[m].astype(np.int64))
             self.parts[f"{name}_segment"].append(seg[m].astype(np.int64))
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The four arrays, each kind of rows sorted by original index (matched by a
-        binary search of sorted keys)."""
+        binary search of sorted keys), and the pieces' rows and counts."""
         out = {k: _joined(v) for k, v in self.parts.items()}
         for kind in ("buffer", "core"):
             order = np.argsort(out[f"{kind}_index"])
             out[f"{kind}_index"], out[f"{kind}_segment"] = out[f"{kind}_index"][order], out[f"{kind}_segment"][order]
+        width = max([1, *(len(c) for c in self.piece_core)])
+        out["piece_rows"] = np.asarray(self.piece_rows, dtype=np.int64)
+        out["piece_core"] = np.zeros((len(self.piece_core), width), dtype=np.int64)
+        for i, c in enumerate(self.piece_core):
+            out["piece_core"][i, :len(c)] = c
         return out
 
 
@@ -211,13 +229,19 @@ def _edges(store: RunStore, tile: int, rows: str) -> dict[str, np.ndarray]:
     return rows.arrays()
 
 
-def stitch_pairs(url: str, tile: int, neighbours: Sequence[int], h: str) -> np.ndarray:
+def stitch_pairs(url: str, tile: int, neighbours: Sequence[int], h: str,
+                 part: tuple[int, int, int] | None = None) -> np.ndarray:
     """Pairs task: ``(k, 5)`` int64 rows ``(tile, segment, neighbour, its segment, shared
-    points)``: the tile's segmented buffer rows found among the segmented edge core rows
-    of ``neighbours`` (every buffer row is a copy of one of their core rows)."""
+    points)``: the tile's segmented buffer rows (all, or ``part = (k, first, end)`` of
+    them) found among the segmented edge core rows of ``neighbours`` (every buffer row is
+    a copy of one of their core rows)."""
     store = RunStore.open(url, mode="a")
-    own = _edges(store, tile, "buffer")
-    b_idx, b_seg = own["buffer_index"], own["buffer_segment"]
+    if part is None:
+        own = _edges(store, tile, "buffer")
+        b_idx, b_seg = own["buffer_index"], own["buffer_segment"]
+    else:
+        b_idx, b_seg = (store.read_slice(f"coarse/edges/{tile}/buffer_{k}", part[1], part[2])
+                        for k in ("index", "segment"))
     out = [np.zeros((0, 5), dtype=np.int64)]
     for n in neighbours if len(b_idx) else ():
         other = _edges(store, n, "core")
@@ -239,15 +263,18 @@ def stitch_pairs(url: str, tile: int, neighbours: Sequence[int], h: str) -> np.n
             pair, cnt = np.unique(code, return_counts=True)
         out.append(np.column_stack([np.full(len(pair), tile), pair // width, np.full(len(pair), n), pair % width,
                                     cnt]))
-    store.record(PAIRS_STAGE, str(tile), {"params_hash": h, "n_points": int(len(b_idx))})
+    store.record(PAIRS_STAGE, str(tile) if part is None else f"{tile}.{part[0]}",
+                 {"params_hash": h, "n_points": int(len(b_idx))})
     return np.concatenate(out).astype(np.int64)
 
 
-def stitch_part(url: str, tile: int, lookup: np.ndarray, cursor: np.ndarray, h: str) -> int:
+def stitch_part(url: str, tile: int, k: int, span: tuple[int, int], lookup: np.ndarray, cursor: np.ndarray,
+                h: str) -> int:
     """Parts task: the global id (``lookup[local segment]`` of a core row, else 0) and
-    CSR position of every row of the tile; and its CSR rows (original index, store xyz)
-    in CSR order, at ``coarse/csr_parts/<tile>``. ``cursor``: ``(g, first position, first
-    part row)`` for each global segment the tile holds; a segment's rows of one tile are
+    CSR position of every row in ``span = (first, end)`` of the tile (whole chunks: the
+    driver made its arrays); and their CSR rows (original index, store xyz) in CSR order,
+    at ``coarse/csr_parts/<tile>/<k>``. ``cursor``: ``(g, first position, first part
+    row)`` for each global segment the rows hold; a segment's rows of one part are
     consecutive in both, in row order. Returns the CSR rows written.
 
     The part is filled through a disk-backed scratch file (positioned writes, not a memory
@@ -259,13 +286,10 @@ def stitch_part(url: str, tile: int, lookup: np.ndarray, cursor: np.ndarray, h: 
     part_at = np.zeros(len(first), dtype=np.int64)
     first[cursor[:, 0]], part_at[cursor[:, 0]] = cursor[:, 1], cursor[:, 2]
     n_of = np.zeros(len(first), dtype=np.int64)
-    n_rows = store.array_length(f"coarse/tiles/{tile}/segment")
-    store.create_array(f"coarse/tiles/{tile}/global", shape=(n_rows,), dtype=np.uint64)
-    store.create_array(f"coarse/tiles/{tile}/csr_pos", shape=(n_rows,), dtype=np.int64)
     written = 0
     with tempfile.TemporaryFile() as scratch_i, tempfile.TemporaryFile() as scratch_x:
         fd_i, fd_x = scratch_i.fileno(), scratch_x.fileno()
-        for d in _pieces(store, tile, ("core", "index", "xyz")):
+        for d in _pieces(store, tile, ("core", "index", "xyz"), span):
             seg = d["segment"]
             top = int(seg.max(initial=0))
             lut = lookup if top < len(lookup) else np.r_[lookup, np.zeros(top + 1 - len(lookup), np.int64)]
@@ -290,28 +314,30 @@ def stitch_part(url: str, tile: int, lookup: np.ndarray, cursor: np.ndarray, h: 
                 written += len(rows)
             store.write_slice(f"coarse/tiles/{tile}/global", int(d["start"]), glob.astype(np.uint64))
             store.write_slice(f"coarse/tiles/{tile}/csr_pos", int(d["start"]), pos)
-        writer = store.unit_writer(f"coarse/csr_parts/{tile}", n_rows=written)
+        writer = store.unit_writer(f"coarse/csr_parts/{tile}/{k}", n_rows=written)
         for a in range(0, written, READ_ROWS):
             m = min(READ_ROWS, written - a)
             writer.append({"indices": _pread_all(fd_i, m * 8, a * 8).view(np.uint64),
                            "xyz": _pread_all(fd_x, m * 12, a * 12).view(np.int32).reshape(m, 3)})
         writer.close({"indices": np.zeros(0, np.uint64), "xyz": np.zeros((0, 3), np.int32)})
-    store.record(PARTS_STAGE, str(tile), {"params_hash": h, "n_points": n_rows})
+    store.record(PARTS_STAGE, f"{tile}.{k}", {"params_hash": h, "n_points": span[1] - span[0]})
     return written
 
 
-def stitch_csr(url: str, unit: int, first: int, end: int, blocks: np.ndarray, h: str) -> int:
+def stitch_csr(url: str, unit: int, first: int, end: int, blocks: np.ndarray, parts: dict[int, str],
+               h: str) -> int:
     """CSR task: CSR rows ``[first, end)`` (``first`` on a chunk boundary) from the tiles'
-    parts. ``blocks``: ``(tile, CSR position, part row, rows)`` of every run of a tile's
-    part rows in the range (a tile's runs are consecutive part rows: one read per tile)."""
+    parts. ``blocks``: ``(part, CSR position, part row, rows)`` of every run of a part's
+    rows in the range (a part's runs are consecutive part rows: one read per part);
+    ``parts``: each part's group path."""
     store = RunStore.open(url, mode="a")
     indices = np.zeros(end - first, dtype=np.uint64)
     xyz = np.zeros((end - first, 3), dtype=np.int32)
     for t in np.unique(blocks[:, 0]).tolist():
         bt = blocks[blocks[:, 0] == t]
         lo, hi = int(bt[:, 2].min()), int((bt[:, 2] + bt[:, 3]).max())
-        part_i = store.read_slice(f"coarse/csr_parts/{t}/indices", lo, hi)
-        part_x = store.read_slice(f"coarse/csr_parts/{t}/xyz", lo, hi)
+        part_i = store.read_slice(f"{parts[t]}/indices", lo, hi)
+        part_x = store.read_slice(f"{parts[t]}/xyz", lo, hi)
         for _, p, r, n in bt.tolist():
             indices[p - first:p - first + n] = part_i[r - lo:r - lo + n]
             xyz[p - first:p - first + n] = part_x[r - lo:r - lo + n]
@@ -319,6 +345,26 @@ def stitch_csr(url: str, unit: int, first: int, end: int, blocks: np.ndarray, h:
     store.write_slice("coarse/csr/xyz", first, xyz)
     store.record(CSR_STAGE, str(unit), {"params_hash": h, "n_points": end - first})
     return end - first
+
+
+def _row_parts(store: RunStore, t: int, n_rows: int, k: int, key_rows: dict[int, list[tuple[int, int]]],
+               info: dict[tuple[int, int], dict[str, Any]]) -> list[tuple[int, int, np.ndarray]]:
+    """Tile ``t``'s rows cut into ``k`` parts at the pieces its coarse task counted (whole
+    chunks): ``(first row, end row, core rows per tile-local segment)`` each; one part
+    with the table's counts where the tile has no such counts."""
+    if k > 1 and store.has(f"coarse/edges/{t}/piece_rows"):
+        rows = store.read_slice(f"coarse/edges/{t}/piece_rows")
+        core = store.read_slice(f"coarse/edges/{t}/piece_core")
+        ends = np.cumsum(rows)
+        if len(rows) and ends[-1] == n_rows and not np.any(ends[:-1] % CHUNK_POINTS):
+            k = min(k, len(rows))
+            cuts = [i * len(rows) // k for i in range(k + 1)]
+            starts = np.r_[0, ends]
+            return [(int(starts[a]), int(starts[b]), core[a:b].sum(axis=0)) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+    local = np.zeros(max([1, *(s_ + 1 for s_, _ in key_rows.get(t, []))]), dtype=np.int64)
+    for s_, _ in key_rows.get(t, []):
+        local[s_] = info[(t, s_)]["n_core"]
+    return [(0, n_rows, local)]
 
 
 def stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams, *, runner: Any, h: str = "") -> tuple[int, int]:
@@ -347,6 +393,13 @@ def stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams, *, runne
         near = [grid.tile_id(jx, jy) for jy in (iy - 1, iy, iy + 1) for jx in (ix - 1, ix, ix + 1)
                 if (jx, jy) != (ix, iy) and 0 <= jx < grid.shape[0] and 0 <= jy < grid.shape[1]]
         jobs.append((store.url, t, [n for n in near if n in present], h))
+    # a tile of many buffer rows (a dense one) is matched in parts of about the median's
+    n_buffer = {t: (store.array_length(f"coarse/edges/{t}/buffer_index") if store.has(f"coarse/edges/{t}") else 0)
+                for t in tiles}
+    k_buffer = part_counts(n_buffer, above=UNIT_SPLIT, cap={t: max(1, n) for t, n in n_buffer.items()})
+    jobs = [job if k_buffer[job[1]] == 1 else
+            (*job, (k, k * n_buffer[job[1]] // k_buffer[job[1]], (k + 1) * n_buffer[job[1]] // k_buffer[job[1]]))
+            for job in jobs for k in range(k_buffer[job[1]])]
     found = runner(stitch_pairs, jobs, "coarse: stitch pairs")
     pairs = np.concatenate([np.zeros((0, 5), np.int64), *found])
 
@@ -405,28 +458,34 @@ def stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams, *, runne
         gm = np.array([gmin for gmin, _, _ in live], dtype=np.int64)
         group_of_segment[1:] = np.cumsum(np.r_[True, gm[1:] != gm[:-1]])
 
-    # Each global segment's core points per tile, from the tables (their n_core counts the
-    # tile's core rows of each segment); a tile's rows of one segment are consecutive in
-    # the CSR, tiles in order, rows in row order.
-    key_tile = np.array([k[0] for k in keys], dtype=np.int64)
+    # Each global segment's core points per part of a tile, from what its coarse task
+    # counted (or the tables); a part's rows of one segment are consecutive in the CSR,
+    # tiles in order, a tile's parts in order, rows in row order.
     key_core = np.array([info[k]["n_core"] for k in keys], dtype=np.int64)
     counts = np.bincount(key_global, weights=key_core, minlength=n_segments + 1).astype(np.int64)
     offsets = np.r_[0, np.cumsum(counts[1:])].astype(np.int64)
     total = int(offsets[-1])
+    n_rows = {t: store.array_length(f"coarse/tiles/{t}/segment") for t in tiles}
+    k_rows = part_counts(n_rows, above=UNIT_SPLIT, cap={t: max(1, -(-n // READ_ROWS)) for t, n in n_rows.items()})
     run = offsets[:-1].copy()
-    jobs, blocks = [], []
+    jobs, blocks, paths = [], [], {}
     for t in tiles:
         lookup = np.zeros(len(key_lut.get(t, [0])), dtype=np.int64)
         for s_, i in key_rows.get(t, []):
             lookup[s_] = key_global[i]
-        m = (key_tile == t) & (key_global > 0)
-        g, inv = np.unique(key_global[m], return_inverse=True)
-        n = np.bincount(inv, weights=key_core[m], minlength=len(g)).astype(np.int64)
-        g, n = g[n > 0], n[n > 0]
-        first = run[g - 1].copy()
-        run[g - 1] += n
-        jobs.append((store.url, t, lookup, np.stack([g, first, np.cumsum(n) - n], axis=1), h))
-        blocks.append(np.stack([np.full(len(g), t), first, np.cumsum(n) - n, n], axis=1))
+        store.create_array(f"coarse/tiles/{t}/global", shape=(n_rows[t],), dtype=np.uint64)
+        store.create_array(f"coarse/tiles/{t}/csr_pos", shape=(n_rows[t],), dtype=np.int64)
+        for k, (first_row, end_row, local) in enumerate(_row_parts(store, t, n_rows[t], k_rows[t], key_rows, info)):
+            ids = np.arange(len(local))
+            gl = np.where(ids < len(lookup), lookup[np.minimum(ids, len(lookup) - 1)], 0)
+            per_g = np.bincount(gl, weights=local, minlength=n_segments + 1).astype(np.int64)
+            g = np.flatnonzero(per_g[1:]) + 1
+            n = per_g[g]
+            first = run[g - 1].copy()
+            run[g - 1] += n
+            paths[len(paths)] = f"coarse/csr_parts/{t}/{k}"
+            jobs.append((store.url, t, k, (first_row, end_row), lookup, np.stack([g, first, np.cumsum(n) - n], axis=1), h))
+            blocks.append(np.stack([np.full(len(g), len(paths) - 1), first, np.cumsum(n) - n, n], axis=1))
     runner(stitch_part, jobs, "coarse: stitch parts")
     store.write_unit("coarse/csr", {"offsets": offsets})
     store.create_array("coarse/csr/indices", shape=(total,), dtype=np.uint64)
@@ -439,7 +498,7 @@ def stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams, *, runne
         start, end = np.maximum(bl[:, 1], lo), np.minimum(bl[:, 1] + bl[:, 3], hi)
         bl[:, 2] += start - bl[:, 1]
         bl[:, 1], bl[:, 3] = start, end - start
-        units.append((store.url, j, lo, hi, bl, h))
+        units.append((store.url, j, lo, hi, bl, {int(i): paths[int(i)] for i in np.unique(bl[:, 0])}, h))
     runner(stitch_csr, units, "coarse: csr")
     store.delete("coarse/csr_parts")
     store.delete("coarse/edges")

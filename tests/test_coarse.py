@@ -532,6 +532,39 @@ def test_stitch_reads_a_piece_at_a_time(tiled20, tmp_path, monkeypatch):
             assert np.array_equal(pieces[k], v), k
 
 
+def test_dense_tiles_are_stitched_in_parts(scan, tmp_path, monkeypatch):
+    """A tile above twice the median is stitched in parts (its buffer rows matched in
+    slices, its CSR rows written per run of the pieces its coarse task counted), with
+    the global ids, CSR and table of the stitch in whole tiles."""
+    import hollowtree.pipeline.coarse as coarse
+    import hollowtree.pipeline.coarse_stitch as coarse_stitch
+
+    monkeypatch.setattr(coarse, "READ_ROWS", 2_048)
+    monkeypatch.setattr(coarse_stitch, "READ_ROWS", 2_048)
+    monkeypatch.setattr(coarse_stitch, "CHUNK_POINTS", 1_024)
+    monkeypatch.setattr(coarse_stitch, "CSR_ROWS", 4_096)
+    out = {}
+    for split in (float("inf"), 2.0):
+        monkeypatch.setattr(coarse_stitch, "UNIT_SPLIT", split)
+        store = tmp_path / f"s{split}"
+        _segment(scan, store, 10.0)
+        s = RunStore.open(store)
+        tiles = [int(t) for t in s.attrs["ingest"]["tiles"]]
+        out[split] = {"csr": s.read_unit("coarse/csr"), "table": pq.read_table(store / "coarse" / "segments.parquet"),
+                      **{t: s.read_unit(f"coarse/tiles/{t}", ["global", "csr_pos"]) for t in tiles},
+                      "parts": set(s.records("coarse.csr_parts")), "pairs": set(s.records("coarse.pairs"))}
+    whole, parts = out[float("inf")], out[2.0]
+    assert any(u.endswith(".1") for u in parts["parts"]), parts["parts"]  # some tile in row parts
+    assert any(u.endswith(".1") for u in parts["pairs"]), parts["pairs"]  # and its buffer in slices
+    assert not any(u.endswith(".1") for u in whole["parts"] | whole["pairs"])
+    for c in whole["table"].column_names:  # NaN == NaN here
+        np.testing.assert_array_equal(whole["table"].column(c).to_numpy(), parts["table"].column(c).to_numpy())
+    for k in whole:
+        if isinstance(k, int) or k == "csr":
+            for name, v in whole[k].items():
+                assert np.array_equal(v, parts[k][name]), (k, name)
+
+
 def test_interrupted_block_tasks_resume(scan, blocked8k, tmp_path):
     """A run stopped after some block tasks resumes: planned tiles are not cut again,
     recorded blocks are not run again, and the answer is that of an uninterrupted run."""
