@@ -44,6 +44,7 @@ WAVES = (
     ("coarse", "parts", "coarse.csr_parts"),
     ("coarse", "csr", "coarse.csr"),
     ("tree", "batches", "tree"),
+    ("tree", "spread", "tree.spread"),
     ("labels", "tiles", "labels_tiles"),
     ("labels", "ranges", "labels"),
 )

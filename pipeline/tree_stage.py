@@ -17,6 +17,9 @@ Store layout written here (``docs/store.md``)::
                                             instances of the tree, and one instance per planar
                                             class (ground, wall, roof) and element group
     tree/batches/<b>/score     float32(n,)  the classifier's score of the leaf
+    tree/sampled/<b>                        a group above max_group_points: the sample its tree
+                                            was built on, with its labels; spread to the group's
+                                            points by chunk-aligned spread units (then deleted)
     tree/tables/<b>.parquet                 the batch's tree nodes (``segment``: the first
                                             global segment of the node's group)
     tree/nodes.parquet                      every node of every segment, instances numbered globally
@@ -41,12 +44,13 @@ from hollowtree.pipeline.graph import in_child
 from hollowtree.pipeline.timing import UNIT_BALANCE
 from hollowtree.pipeline.tree_params import DEVICES, TreeStageParams
 from hollowtree.tiling.stage import Stage, params_hash
-from hollowtree.tiling.store import RunStore
+from hollowtree.tiling.store import CHUNK_POINTS, RunStore
 from hollowtree.tree.tall import short_minarets, size_rules, slender_domes
 
 __all__ = ["TreeStageParams", "tree_batch", "run_tree", "TreeReport", "plan_batches", "group_starts"]
 
 STAGE = "tree"
+SPREAD_STAGE = "tree.spread"
 #: Version of the tree's algorithm (tree/): part of the stage's parameters hash and of the
 #: workflow parameters a run records, so a store made by an older version is redone. What
 #: each version changed is in CHANGELOG.md (and git).
@@ -228,14 +232,15 @@ def _group_tree(pts: np.ndarray, s: int, params: TreeStageParams, clf: Any, grou
 
 
 def _sampled_group_tree(store: RunStore, b: int, lo: int, hi: int, s: int, scale: np.ndarray,
-                        params: TreeStageParams, clf: Any, ground_level: float | None) -> tuple[dict[str, list[Any]], int]:
+                        params: TreeStageParams, clf: Any, ground_level: float | None
+                        ) -> tuple[dict[str, list[Any]], int, int]:
     """The tree of one element group above ``max_group_points``, in bounded memory: built
     on a seeded random sample of about ``max_group_points`` of its points (read chunk by
-    chunk), then every point takes the labels of its nearest sampled point, written chunk
-    by chunk. The node table's ``n_points`` count all the group's points; its bounding
-    boxes are the sample's. Returns the node columns and the instance count."""
-    from scipy.spatial import cKDTree
-
+    chunk). The sample and its labels go to ``tree/sampled/<b>`` and the batch's arrays are
+    made at the group's length: :func:`spread_labels` units then give every point the
+    labels of its nearest sampled point and count the leaves' points (the node table's
+    ``n_points``, set by :func:`_spread_counts`; its bounding boxes are the sample's).
+    Returns the node columns, the instance count and the sample's size."""
     n = hi - lo
     step = max(params.max_group_points, 1_000_000)
     rng = np.random.default_rng(np.random.SeedSequence([params.seed, s + 1, 1]))
@@ -246,22 +251,49 @@ def _sampled_group_tree(store: RunStore, b: int, lo: int, hi: int, s: int, scale
         parts.append(chunk[rng.random(len(chunk)) < keep])
     sample = np.concatenate(parts).astype(np.float64) * scale
     values, cols, n_inst = _group_tree(sample, s, params, clf, ground_level, 0)
-    kd = cKDTree(sample, balanced_tree=False)
-    n_leaf = np.zeros(len(cols["node_id"]), np.int64)
-    writer = store.unit_writer(f"tree/batches/{b}", n_rows=n)
-    for a in range(lo, hi, step):
-        pts = store.read_slice("coarse/csr/xyz", a, min(a + step, hi)).astype(np.float64) * scale
-        _, j = kd.query(pts, workers=-1)
-        writer.append({k: v[j] for k, v in values.items()})
-        n_leaf += np.bincount(values["leaf"][j].astype(np.int64), minlength=len(n_leaf))
-    writer.close(values)
+    store.write_unit(f"tree/sampled/{b}", {"xyz": sample, **values})
+    for k, v in values.items():
+        store.create_array(f"tree/batches/{b}/{k}", shape=(n,), dtype=v.dtype)
     _write_samples(store, b, sample, values, params.seed, [(0, len(sample), s)])
-    # Every node counts the group's points in its leaves (children come after their parent).
-    parent = np.asarray(cols["parent"], dtype=np.int64)
+    return cols, n_inst, len(sample)
+
+
+def spread_labels(url: str, b: int, j: int, rows: tuple[int, int], csr: tuple[int, int], scale: list[float],
+                  h: str) -> list[int]:
+    """Spread task: rows ``rows = (first, end)`` of batch ``b`` (a sampled group at CSR rows
+    ``csr``; ``first`` on a chunk boundary) take the labels of their nearest sampled point
+    (``tree/sampled/<b>``). Returns and records the points per leaf node."""
+    from scipy.spatial import cKDTree
+
+    store = RunStore.open(url, mode="a")
+    sampled = store.read_unit(f"tree/sampled/{b}")
+    sample = sampled.pop("xyz")
+    kd = cKDTree(sample, balanced_tree=False)  # as the tree's own: the same nearest points
+    counts = np.zeros(int(sampled["leaf"].max(initial=0)) + 1, np.int64)
+    step = 4 * CHUNK_POINTS
+    for a in range(rows[0], rows[1], step):
+        z = min(a + step, rows[1])
+        pts = store.read_slice("coarse/csr/xyz", csr[0] + a, csr[0] + z).astype(np.float64) * np.asarray(scale)
+        _, near = kd.query(pts, workers=-1)
+        for k, v in sampled.items():
+            store.write_slice(f"tree/batches/{b}/{k}", a, v[near])
+        counts += np.bincount(sampled["leaf"][near].astype(np.int64), minlength=len(counts))
+    store.record(SPREAD_STAGE, f"{b}.{j}", {"params_hash": h, "n_points": rows[1] - rows[0],
+                                             "rows": list(rows), "leaf_points": counts.tolist()})
+    return counts.tolist()
+
+
+def _spread_counts(store: RunStore, b: int, table: pa.Table, leaf_points: list[list[int]]) -> pa.Table:
+    """A sampled batch's node table with ``n_points``: every node counts the group's points
+    in its leaves (children come after their parent)."""
+    parent = np.asarray(table.column("parent").to_numpy(), dtype=np.int64)
+    n_leaf = np.zeros(len(parent), np.int64)
+    for c in leaf_points:
+        n_leaf[:len(c)] += np.asarray(c[:len(parent)], dtype=np.int64)
     for k in range(len(parent) - 1, 0, -1):
         n_leaf[parent[k]] += n_leaf[k]
-    cols["n_points"] = n_leaf.tolist()
-    return cols, n_inst
+    return table.set_column(table.schema.get_field_index("n_points"), "n_points",
+                            pa.array(n_leaf, type=table.schema.field("n_points").type))
 
 
 def _write_samples(store: RunStore, b: int, xyz: np.ndarray, values: dict[str, np.ndarray], seed: int,
@@ -311,9 +343,11 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
             return None
         return float(np.min(ground[s - segs[0]:s_end - segs[0]]))
 
+    sampled = 0
     if len(bounds) == 2 and params.max_group_points and n > params.max_group_points:
-        cols, n_inst = _sampled_group_tree(store, b, lo, hi, segs[0], scale, params, clf,
-                                           ground_level(segs[0], segs[1]))
+        cols, n_inst, sampled = _sampled_group_tree(store, b, lo, hi, segs[0], scale, params, clf,
+                                                    ground_level(segs[0], segs[1]))
+        cols["n_points"] = [0] * len(cols["node_id"])  # the spread units count them
     else:
         xyz = store.read_slice("coarse/csr/xyz", lo, hi).astype(np.float64) * scale
         out = {"leaf": np.zeros(n, np.uint64), "class": np.zeros(n, np.uint8), "instance": np.zeros(n, np.uint32),
@@ -332,8 +366,9 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
         store.write_unit(f"tree/batches/{b}", out)
         _write_samples(store, b, xyz, out, params.seed, groups)
     store.write_table(f"tree/tables/{b}.parquet", pa.table(cols))
-    info = {"params_hash": cfg["params_hash"], "n_segments": segs[1] - segs[0], "n_points": n,
-            "n_nodes": len(cols["segment"]), "n_instances": n_inst, "csr": [lo, hi]}
+    # a sampled group's unit holds its sample; the spread units hold its points
+    info = {"params_hash": cfg["params_hash"], "n_segments": segs[1] - segs[0], "n_points": sampled or n,
+            "n_nodes": len(cols["segment"]), "n_instances": n_inst, "csr": [lo, hi], "sampled": sampled}
     store.record(STAGE, str(b), info)
     return info
 
@@ -388,7 +423,7 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any, device: str = "c
         raise PipelineError(f"store {url}: the coarse stage is not complete; run it first")
     h = params_hash([params.to_dict(), coarse["params_hash"], TREE_ALGORITHM, _check_fingerprint(params)])
     cfg = {"params": params.to_dict(), "params_hash": h, "device": device}
-    stage = Stage(store, STAGE, h)
+    stage = Stage(store, STAGE, h, unit_stages=(SPREAD_STAGE,))
     completed = stage.last.get("params_hash") == h
     stage.clear_if_changed()
     offsets = store.read_unit("coarse/csr", ["offsets"])["offsets"]
@@ -418,11 +453,15 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any, device: str = "c
     for b, info in zip(todo, results, strict=True):
         done[str(b)] = info
     infos = [done[str(b)] for b in range(len(batches))]
+    spread = _spread(store, infos, h, runner)
     inst_offsets = np.r_[0, np.cumsum([i["n_instances"] for i in infos])].astype(np.int64)
     if todo or not completed:
         tables = []
         for b in range(len(batches)):
             t = store.read_table(f"tree/tables/{b}.parquet")
+            if b in spread:
+                t = _spread_counts(store, b, t, spread[b])
+                store.write_table(f"tree/tables/{b}.parquet", t)
             inst = np.asarray(t.column("instance").to_numpy(), dtype=np.int64)
             t = t.set_column(t.schema.get_field_index("instance"), "instance",
                              pa.array(np.where(inst > 0, inst + inst_offsets[b], 0)))
@@ -451,6 +490,33 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any, device: str = "c
     return TreeReport(n_segments=len(offsets) - 1, n_groups=len(starts) - 1, n_batches=len(batches), batches_run=len(todo),
                       n_nodes=n_nodes, n_instances=int(inst_offsets[-1]) - n_merged, n_merged=n_merged,
                       seconds=time.perf_counter() - t0)
+
+
+def _spread(store: RunStore, infos: list[dict[str, Any]], h: str, runner: Any) -> dict[int, list[list[int]]]:
+    """Run the spread units of the sampled batches (units of about the median batch's
+    points, whole chunks; recorded ones skipped); their leaf counts by batch."""
+    pts = sorted(int(i["n_points"]) for i in infos if int(i["n_points"]) > 0)
+    step = max(1, round(pts[len(pts) // 2] / CHUNK_POINTS)) * CHUNK_POINTS if pts else CHUNK_POINTS
+    done = Stage(store, STAGE, h).done(SPREAD_STAGE)
+    scale = [float(v) for v in store.attrs["coords"]["scale"]]
+    units, plan = [], {}
+    for b, info in enumerate(infos):
+        if not info.get("sampled"):
+            continue
+        lo, hi = info["csr"]
+        n = hi - lo
+        k = -(-n // step)
+        width = -(-n // k)
+        width = -(-width // CHUNK_POINTS) * CHUNK_POINTS  # whole chunks per unit
+        plan[b] = [(j, (j * width, min((j + 1) * width, n))) for j in range(k) if j * width < n]
+        units += [(store.url, b, j, r, (lo, hi), scale, h) for j, r in plan[b]
+                  if done.get(f"{b}.{j}", {}).get("rows") != list(r)]
+    if units:
+        runner(spread_labels, units, "tree: spread")
+        done = Stage(store, STAGE, h).done(SPREAD_STAGE)
+    out = {b: [done[f"{b}.{j}"]["leaf_points"] for j, _ in p] for b, p in plan.items()}
+    store.delete("tree/sampled")
+    return out
 
 
 def _arcade_rows(store: RunStore, n_batches: int, inst_offsets: np.ndarray, imap: np.ndarray,

@@ -127,14 +127,16 @@ def test_large_groups_are_built_on_a_sample(tmp_path, scan, shallow):
     store, sampled = _run(tmp_path / "a", scan, tree="{enabled: true, max_depth: 1, max_group_points: 4000}")
     _, full = shallow  # every group of this small scan is below the default max_group_points
     recs = store.records("tree")
-    big = [b for b, r in recs.items() if r["n_points"] > 4000 and r["n_segments"] >= 1]
+    big = [b for b, r in recs.items() if r.get("sampled")]  # its unit holds the sample
     assert big
+    spread = store.records("tree.spread")  # the spread units hold the group's points
     for b in big:
         t = pq.read_table(tmp_path / "a" / "s.zarr" / "tree" / "tables" / f"{b}.parquet").to_pydict()
         roots = [i for i, p in enumerate(t["parent"]) if p == -1]
-        if len(roots) != 1:  # a batch of several groups: not sampled
-            continue
-        n = recs[b]["n_points"]
+        assert len(roots) == 1  # one group
+        n = recs[b]["csr"][1] - recs[b]["csr"][0]
+        assert recs[b]["n_points"] == recs[b]["sampled"] < n
+        assert sum(r["n_points"] for u, r in spread.items() if u.split(".")[0] == b) == n
         assert t["n_points"][roots[0]] == n
         assert sum(k for k, leaf in zip(t["n_points"], t["is_leaf"], strict=True) if leaf) == n
         leaf = store.read_slice(f"tree/batches/{b}/leaf")

@@ -57,3 +57,55 @@ def test_alike_tiles_keep_block_points_and_one_large_group_stays_alone():
     assert (40, 41) in plan
     assert max(sizes) <= UNIT_BALANCE * np.median(sizes)
     assert plan_batches(offsets, 5) == [(g, g + 1) for g in range(81)]  # without balance: one group a batch
+
+
+def test_a_sampled_group_is_spread_by_units_and_resumes(uneven, tmp_path, monkeypatch):
+    """A group above max_group_points: its batch builds the tree on the sample, spread
+    units of whole chunks label its points; a run stopped among them resumes to the same
+    labels as one that was not."""
+    import shutil
+
+    import hollowtree.pipeline.tree_stage as tree_stage
+
+    monkeypatch.setattr(tree_stage, "CHUNK_POINTS", 1_024)  # several spread units per group
+    params = TreeStageParams(batch_points=2_000, max_group_points=1_000)
+    stores = {k: tmp_path / k for k in ("whole", "stopped")}
+    for p in stores.values():
+        shutil.copytree(uneven, p)
+        s = RunStore.open(p, mode="a")  # a tree stage never run (another one would be redone whole)
+        s.update_attrs({"stages": {k: v for k, v in s.attrs["stages"].items() if k != "tree"}})
+
+    class Stop(Exception):
+        pass
+
+    with task_runner("sync", progress=False) as run:
+        run_tree(str(stores["whole"]), params, runner=run)
+
+        def dies_in_spread(fn, args, desc):
+            if desc == "tree: spread":
+                run(fn, args[: len(args) // 2], desc)
+                raise Stop
+            return run(fn, args, desc)
+
+        with pytest.raises(Stop):
+            run_tree(str(stores["stopped"]), params, runner=dies_in_spread)
+        seen = []
+
+        def counting(fn, args, desc):
+            seen.append((desc, len(args)))
+            return run(fn, args, desc)
+
+        run_tree(str(stores["stopped"]), params, runner=counting)
+    a, b = RunStore.open(stores["whole"]), RunStore.open(stores["stopped"])
+    spread = a.records("tree.spread")
+    assert len(spread) > len({u.split(".")[0] for u in spread})  # groups of several units
+    assert ("tree: batches", 0) in seen
+    assert ("tree: spread", len(spread) - len(spread) // 2) in seen
+    for bb in a.records("tree"):
+        for k in ("leaf", "class", "instance", "score"):
+            assert np.array_equal(a.read_slice(f"tree/batches/{bb}/{k}"), b.read_slice(f"tree/batches/{bb}/{k}"))
+    na, nb = a.read_table("tree/nodes.parquet"), b.read_table("tree/nodes.parquet")
+    for c in na.column_names:  # NaN == NaN here
+        np.testing.assert_array_equal(na.column(c).to_numpy(), nb.column(c).to_numpy())
+    assert not a.has("tree/sampled")
+    assert not b.has("tree/sampled")
