@@ -177,7 +177,7 @@ class EdgeRows:
 
     NAMES = ("buffer_index", "buffer_segment", "core_index", "core_segment")
     #: and per piece of rows added: its rows, and its core rows per tile-local segment (the
-    #: stitch cuts a dense tile's CSR work at these pieces)
+    #: stitch cuts a dense tile's CSR work at these pieces; pieces x segments, flattened)
     PIECES = ("piece_rows", "piece_core")
 
     def __init__(self, store: RunStore, tile: int) -> None:
@@ -212,9 +212,11 @@ class EdgeRows:
             out[f"{kind}_index"], out[f"{kind}_segment"] = out[f"{kind}_index"][order], out[f"{kind}_segment"][order]
         width = max([1, *(len(c) for c in self.piece_core)])
         out["piece_rows"] = np.asarray(self.piece_rows, dtype=np.int64)
-        out["piece_core"] = np.zeros((len(self.piece_core), width), dtype=np.int64)
+        core = np.zeros((len(self.piece_core), width), dtype=np.int64)
         for i, c in enumerate(self.piece_core):
-            out["piece_core"][i, :len(c)] = c
+            core[i, :len(c)] = c
+        # flat: a store chunk holds CHUNK_POINTS rows, each of a 2-D array's full width
+        out["piece_core"] = core.reshape(-1)
         return out
 
 
@@ -354,7 +356,7 @@ def _row_parts(store: RunStore, t: int, n_rows: int, k: int, key_rows: dict[int,
     with the table's counts where the tile has no such counts."""
     if k > 1 and store.has(f"coarse/edges/{t}/piece_rows"):
         rows = store.read_slice(f"coarse/edges/{t}/piece_rows")
-        core = store.read_slice(f"coarse/edges/{t}/piece_core")
+        core = store.read_slice(f"coarse/edges/{t}/piece_core").reshape(len(rows), -1)
         ends = np.cumsum(rows)
         if len(rows) and ends[-1] == n_rows and not np.any(ends[:-1] % CHUNK_POINTS):
             k = min(k, len(rows))
