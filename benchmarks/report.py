@@ -193,6 +193,30 @@ def scale_workers() -> str:
     return "\n".join(out)
 
 
+def scale_100m() -> str:
+    d = _load("scale-100m.json")
+    r = d["results"][0]
+    q = r["projection"]
+    st = {x["stage"]: x["seconds"] for x in r["stages"]}
+    rate = r["points"] / r["wall_s"]
+    worst = q["unit_balance"]
+    return "\n".join([
+        "| points | workers | wall | points/s | over reference read | ingest / coarse / tree / labels, s | peak process |",
+        "| ---: | ---: | ---: | ---: | ---: | --- | ---: |",
+        f"| {_n(r['points'])} | {r['workers']} | {r['wall_s']:.1f} s | {_n(round(rate))} | "
+        f"{rate / r['reference_read']:.3f} | " + " / ".join(f"{st[k]:.1f}" for k in ("ingest", "coarse", "tree", "labels"))
+        + f" | {max(x['peak_process'] for x in r['stages']) / 2**20:.0f} MB |",
+        "",
+        "Predicted from its units, 1 / 2 / 4 / 16 / 64 workers: "
+        + " / ".join(f"{q['predicted_s'][k]:.1f}" for k in ("1", "2", "4", "16", "64"))
+        + f" s; 16 over 2 **{q['speedup_16_over_2']:.2f}**; {q['target_points'] / 1e9:.2f} B points on 64 workers "
+        f"**{q['target_64_workers_s'] / 60:.1f} min**; driver alone {sum(q['driver_s'].values()):.1f} s, starts "
+        f"{q['other_s']:.1f} s; largest unit over its wave's median, above 1.5x: "
+        + ", ".join(f"{k} {v:.1f}x" for k, v in q["largest_over_median_points"].items() if v and v > 1.5)
+        + f" (limit {worst['limit']:.0f}x).",
+    ])
+
+
 def fuzz() -> str:
     d = _load("fuzz.json")
     kinds: dict[str, Counter] = {}
@@ -513,6 +537,7 @@ GENERATORS: dict[str, Callable[[], str]] = {
     "generalize-test": generalize_test,
     "small": small,
     "scale-workers": scale_workers,
+    "scale-100m": scale_100m,
     "fuzz": fuzz,
     "synth": synth,
     "ingest": ingest,
