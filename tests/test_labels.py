@@ -68,6 +68,16 @@ cluster: {{scheduler: sync}}
     return store, {k: store.read_slice(f"labels/{k}") for k in LABEL_DTYPES}
 
 
+def test_a_run_without_the_tree_says_why_classes_are_0(tmp_path, scan):
+    wf_path = tmp_path / "wf.yaml"
+    wf_path.write_text(f"input: {{files: [{scan}]}}\nstore: {tmp_path / 's.zarr'}\ntree: {{enabled: false}}\n"
+                       "cluster: {scheduler: sync}\n")
+    lines = run_workflow(load_workflow(wf_path), progress=False, say=lambda _: None).lines
+    said = [line for line in lines if "class 0" in line]
+    assert said == ["labels: the tree is off (tree.enabled: false): every point keeps class 0, with its coarse "
+                    "segment and primitive (labels/segment, labels/primitive)"]
+
+
 def test_labels_follow_the_input_order(scan, plain):
     store, lab = plain
     src = laspy.read(scan)
