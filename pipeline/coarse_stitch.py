@@ -369,25 +369,11 @@ def _row_parts(store: RunStore, t: int, n_rows: int, k: int, key_rows: dict[int,
     return [(0, n_rows, local)]
 
 
-def stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams, *, runner: Any, h: str = "") -> tuple[int, int]:
-    """Join tile segments over shared buffer points; write global ids, table and CSR.
-
-    ``runner(fn, args_list, desc)`` runs the tasks (``pipeline.graph``); ``h`` is the
-    stage's hash, in the tasks' records."""
+def _pair_counts(store: RunStore, tiles: Sequence[int], n_keys: int, key_lut: dict[int, np.ndarray],
+                 runner: Any, h: str) -> dict[tuple[int, int], int]:
+    """The pairs wave: shared buffer points per pair of table rows (``key_lut``: per tile,
+    local segment -> row), a dense tile's buffer matched in slices of about the median's."""
     grid = TileGrid.from_dict(store.attrs["grid"])
-    tables = [store.read_table(f"coarse/tables/{t}.parquet").to_pylist() for t in tiles]
-    keys = [(r["tile"], r["segment"]) for tab in tables for r in tab]
-    info = {k: r for k, r in zip(keys, (r for tab in tables for r in tab), strict=True)}
-    # Per tile, local segment id -> row of ``keys`` (a lookup array, not a dict per point).
-    key_rows: dict[int, list[tuple[int, int]]] = {}
-    for i, (tt, s_) in enumerate(keys):
-        key_rows.setdefault(tt, []).append((s_, i))
-    key_lut: dict[int, np.ndarray] = {}
-    for tt, rows in key_rows.items():
-        key_lut[tt] = np.full(max(s_ for s_, _ in rows) + 1, -1, dtype=np.int64)
-        for s_, i in rows:
-            key_lut[tt][s_] = i
-    uf = UnionFind(len(keys))
     present = set(tiles)
     jobs = []
     for t in tiles:
@@ -422,44 +408,19 @@ def stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams, *, runne
     if len(pairs):
         ka, kb = key_of(pairs[:, 0], pairs[:, 1]), key_of(pairs[:, 2], pairs[:, 3])
         lo, hi = np.minimum(ka, kb), np.maximum(ka, kb)
-        code, inv = np.unique(lo * len(keys) + hi, return_inverse=True)
+        code, inv = np.unique(lo * n_keys + hi, return_inverse=True)
         cnt = np.bincount(inv, weights=pairs[:, 4]).astype(np.int64)
-        pair_counts = {(int(c_ // len(keys)), int(c_ % len(keys))): int(n_)
+        pair_counts = {(int(c_ // n_keys), int(c_ % n_keys)): int(n_)
                        for c_, n_ in zip(code.tolist(), cnt.tolist(), strict=True)}
-    sel = [(i, j) for (i, j), n in sorted(pair_counts.items())
-           if n >= 3 and same_primitive(info[keys[i]], info[keys[j]], params)]
-    if sel:
-        arr = np.asarray(sel, dtype=np.int64)
-        uf.union_pairs(arr[:, 0], arr[:, 1])
-    roots = uf.find(np.arange(len(keys))) if keys else np.zeros(0, np.int64)
-    # Global ids 1..G in order of each global segment's lowest core index.
-    n_core = np.array([info[k]["n_core"] for k in keys], dtype=np.int64)
-    min_index = np.array([info[k]["min_index"] if info[k]["n_core"] else np.iinfo(np.int64).max
-                          for k in keys], dtype=np.int64)
-    root_min: dict[int, int] = {}
-    root_core: dict[int, int] = {}
-    for r, m, c in zip(roots.tolist(), min_index.tolist(), n_core.tolist(), strict=True):
-        root_min[r] = min(root_min.get(r, m), m)
-        root_core[r] = root_core.get(r, 0) + c
-    # Element groups: the members of one group get consecutive global ids, so that a
-    # group is one run of the CSR (the tree stage's unit). Without grouping every
-    # segment is its own group and the order is that of each segment's lowest index.
-    group_root = (_element_groups(store, tiles, keys, key_rows, info, roots, params)
-                  if params.group_gap > 0 and keys else roots)
-    group_min: dict[int, int] = {}
-    for r, m in root_min.items():
-        if root_core[r] > 0:
-            gr = int(group_root[r])
-            group_min[gr] = min(group_min.get(gr, m), m)
-    live = sorted((group_min[int(group_root[r])], m, r) for r, m in root_min.items() if root_core[r] > 0)
-    gid_of_root = {r: g + 1 for g, (_, _, r) in enumerate(live)}
-    key_global = np.array([gid_of_root.get(r, 0) for r in roots.tolist()], dtype=np.int64)
-    n_segments = len(live)
-    group_of_segment = np.zeros(n_segments + 1, dtype=np.int64)
-    if live:
-        gm = np.array([gmin for gmin, _, _ in live], dtype=np.int64)
-        group_of_segment[1:] = np.cumsum(np.r_[True, gm[1:] != gm[:-1]])
+    return pair_counts
 
+
+def _write_csr(store: RunStore, tiles: Sequence[int], keys: list[tuple[int, int]],
+               key_rows: dict[int, list[tuple[int, int]]],
+               key_lut: dict[int, np.ndarray], info: dict[tuple[int, int], dict[str, Any]], key_global: np.ndarray,
+               n_segments: int, runner: Any, h: str) -> np.ndarray:
+    """The parts and csr waves: every tile row's global id and CSR position, and the CSR;
+    returns each global segment's core points."""
     # Each global segment's core points per part of a tile, from what its coarse task
     # counted (or the tables); a part's rows of one segment are consecutive in the CSR,
     # tiles in order, a tile's parts in order, rows in row order.
@@ -504,6 +465,63 @@ def stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams, *, runne
     runner(stitch_csr, units, "coarse: csr")
     store.delete("coarse/csr_parts")
     store.delete("coarse/edges")
+    return counts
+
+
+def stitch(store: RunStore, tiles: Sequence[int], params: CoarseParams, *, runner: Any, h: str = "") -> tuple[int, int]:
+    """Join tile segments over shared buffer points; write global ids, table and CSR.
+
+    ``runner(fn, args_list, desc)`` runs the tasks (``pipeline.graph``); ``h`` is the
+    stage's hash, in the tasks' records."""
+    tables = [store.read_table(f"coarse/tables/{t}.parquet").to_pylist() for t in tiles]
+    keys = [(r["tile"], r["segment"]) for tab in tables for r in tab]
+    info = {k: r for k, r in zip(keys, (r for tab in tables for r in tab), strict=True)}
+    # Per tile, local segment id -> row of ``keys`` (a lookup array, not a dict per point).
+    key_rows: dict[int, list[tuple[int, int]]] = {}
+    for i, (tt, s_) in enumerate(keys):
+        key_rows.setdefault(tt, []).append((s_, i))
+    key_lut: dict[int, np.ndarray] = {}
+    for tt, rows in key_rows.items():
+        key_lut[tt] = np.full(max(s_ for s_, _ in rows) + 1, -1, dtype=np.int64)
+        for s_, i in rows:
+            key_lut[tt][s_] = i
+    uf = UnionFind(len(keys))
+    pair_counts = _pair_counts(store, tiles, len(keys), key_lut, runner, h)
+    sel = [(i, j) for (i, j), n in sorted(pair_counts.items())
+           if n >= 3 and same_primitive(info[keys[i]], info[keys[j]], params)]
+    if sel:
+        arr = np.asarray(sel, dtype=np.int64)
+        uf.union_pairs(arr[:, 0], arr[:, 1])
+    roots = uf.find(np.arange(len(keys))) if keys else np.zeros(0, np.int64)
+    # Global ids 1..G in order of each global segment's lowest core index.
+    n_core = np.array([info[k]["n_core"] for k in keys], dtype=np.int64)
+    min_index = np.array([info[k]["min_index"] if info[k]["n_core"] else np.iinfo(np.int64).max
+                          for k in keys], dtype=np.int64)
+    root_min: dict[int, int] = {}
+    root_core: dict[int, int] = {}
+    for r, m, c in zip(roots.tolist(), min_index.tolist(), n_core.tolist(), strict=True):
+        root_min[r] = min(root_min.get(r, m), m)
+        root_core[r] = root_core.get(r, 0) + c
+    # Element groups: the members of one group get consecutive global ids, so that a
+    # group is one run of the CSR (the tree stage's unit). Without grouping every
+    # segment is its own group and the order is that of each segment's lowest index.
+    group_root = (_element_groups(store, tiles, keys, key_rows, info, roots, params)
+                  if params.group_gap > 0 and keys else roots)
+    group_min: dict[int, int] = {}
+    for r, m in root_min.items():
+        if root_core[r] > 0:
+            gr = int(group_root[r])
+            group_min[gr] = min(group_min.get(gr, m), m)
+    live = sorted((group_min[int(group_root[r])], m, r) for r, m in root_min.items() if root_core[r] > 0)
+    gid_of_root = {r: g + 1 for g, (_, _, r) in enumerate(live)}
+    key_global = np.array([gid_of_root.get(r, 0) for r in roots.tolist()], dtype=np.int64)
+    n_segments = len(live)
+    group_of_segment = np.zeros(n_segments + 1, dtype=np.int64)
+    if live:
+        gm = np.array([gmin for gmin, _, _ in live], dtype=np.int64)
+        group_of_segment[1:] = np.cumsum(np.r_[True, gm[1:] != gm[:-1]])
+
+    counts = _write_csr(store, tiles, keys, key_rows, key_lut, info, key_global, n_segments, runner, h)
     # The global table: one row per global segment (the primitive of its largest member).
     members: dict[int, list[dict[str, Any]]] = {}
     for k, g in zip(keys, key_global.tolist(), strict=True):
