@@ -32,12 +32,12 @@ RESULTS = REPO / "benchmarks" / "results"
 #: The latest run of each kind of element-recall result (``bench_generalize.py --json``).
 #: These are the figures of docs/generalize.md; edit the file names when a newer run replaces one.
 LATEST = {
-    "test": "generalize-test-tree-v23.json",
+    "test": "generalize-test-tree-v24.json",
     "test-5m": "generalize-test-5m-forts-tree-v21.json",
-    "val-4m": "generalize-val-4m-tree-v23.json",
-    "val-1m": "generalize-val-density-1m-forts-tree-v21.json",
-    "val-10m": "generalize-val-density-10m-tree-v21.json",
-    "val": "generalize-val-tree-v23.json",
+    "val-4m": "generalize-val-4m-tree-v24.json",
+    "val-1m": "generalize-val-density-1m-tree-v24.json",
+    "val-10m": "generalize-val-density-10m-tree-v24.json",
+    "val": "generalize-val-tree-v24.json",
     # the element check (tree.verify=true, not the default) on the same test sites
     "test-check": "generalize-test-check-tree-v22.json",
     "test-5m-check": "generalize-test-5m-check-tree-v22.json",
@@ -66,6 +66,7 @@ VAL_VARIANTS = {
     "generalize-val-4m-split-proc-t05.json": "rejected: the same at threshold 0.5",
     "generalize-val-4m-split-both.json": "rejected: split model fitted on those and the 52 random scenes, threshold 0.4",
     "generalize-val-4m-tree-v23.json": "`tree-v23`: instance samples drawn per group, not per batch",
+    "generalize-val-4m-tree-v24.json": "`tree-v24`: occupancy cells grown where sparse, the gaps' fixed",
 }
 
 ELEMENTS = ("arch", "dome", "minaret", "pillar")

@@ -239,6 +239,35 @@ def test_gaps_cut_parts_that_do_not_touch():
     assert gaps(np.r_[a, stray]) is None
 
 
+def test_a_sparse_plain_wall_is_not_cut_at_its_noise(monkeypatch):
+    """Where a wall is scanned thinner than the occupancy cell, each 0.1 m cell holds one
+    point and S2's occupancy is the scan's noise: a plain wall gets cut into strips. The
+    cells grow until they hold a few points each, and the same walls keep (almost) whole;
+    a dense wall keeps the 0.1 m cell."""
+    import hollowtree.tree.sequences as seq
+
+    def plain_walls(spacing, n_walls=10):
+        for k in range(n_walls):
+            rng = np.random.default_rng(k)
+            n = int(15.0 * 6.0 / spacing ** 2)
+            yield np.c_[rng.uniform(0, 15, n), rng.normal(0, 0.005, n), rng.uniform(0, 6, n)]
+
+    def cuts(walls):
+        return sum(0 if (p := seq.s2(w)) is None else p.n_children - 1 for w in walls)
+
+    dense = next(plain_walls(0.02, 1))
+    assert seq.occupancy_grid(dense[:, 0], dense[:, 2], 0.1)[0] == 0.1
+    sparse = next(plain_walls(0.25, 1))
+    cell, _, _, first = seq.occupancy_grid(sparse[:, 0], sparse[:, 2], 0.1)
+    assert cell > 0.25
+    assert len(sparse) >= seq.CELL_MIN_POINTS * len(first)
+    grown = cuts(plain_walls(0.25))
+    monkeypatch.setattr(seq, "CELL_MAX_STEPS", 0)  # the fixed 0.1 m cell
+    fixed = cuts(plain_walls(0.25))
+    assert grown <= 15, grown
+    assert fixed >= 50, fixed
+
+
 class _Always:
     def __init__(self, cls):
         self.cls = cls

@@ -50,13 +50,21 @@ from hollowtree.tree.operators import (
     v2,
 )
 
-__all__ = ["GAP_SEQUENCE", "PART_SEQUENCE", "POST_SEQUENCE", "SEQUENCES", "Proposal", "SequenceParams", "gaps", "occupancy_cut", "parts", "propose", "s1",
+__all__ = ["GAP_SEQUENCE", "PART_SEQUENCE", "POST_SEQUENCE", "SEQUENCES", "Proposal", "SequenceParams", "gaps", "occupancy_cut", "occupancy_grid", "parts", "propose", "s1",
            "s2", "s3", "storeys"]
 
 
 #: Sequence ids as stored in the node table (0 = the root, produced by no sequence).
 SEQUENCES: tuple[int, ...] = (1, 2, 3)
 
+#: An occupancy cell of :func:`occupancy_cut` must hold this many points on
+#: average over the occupied cells; a sparser node's cells grow by sqrt(2) until they do
+#: (:func:`occupancy_grid`). With points spread evenly over a surface a cell of the
+#: surface then stays empty with a chance of about exp(-3) = 5 %, so a bay's pier is not
+#: read as an opening where the scan is thin.
+CELL_MIN_POINTS = 3.0
+#: At most this many sqrt(2) steps (a cell of 16 x ``params.cell``).
+CELL_MAX_STEPS = 8
 #: How far (a share of its height) a solid band reaching the top of a node must stand
 #: above the occupancy below it to be a storey cut (:func:`occupancy_cut`).
 OPEN_HIGH_PROMINENCE = 0.25
@@ -317,8 +325,8 @@ def storeys(xyz: npt.ArrayLike, *, params: SequenceParams | None = None,
 
     Examples
     --------
-    >>> t = np.tile(np.linspace(0, 10, 101), 60)
-    >>> z = np.repeat(np.linspace(0, 5.9, 60), 101)
+    >>> t = np.tile(np.linspace(0, 10, 201), 119)
+    >>> z = np.repeat(np.linspace(0, 5.9, 119), 201)
     >>> solid = (np.abs(z - 3.0) < 0.35) | (np.abs(t % 2.0 - 1.0) > 0.6)  # a band at 3 m
     >>> xyz = np.column_stack([t, np.zeros_like(t), z])[solid]
     >>> prop = storeys(xyz)
@@ -358,11 +366,39 @@ def _open_high(hist: Histogram) -> Histogram:
                      n_zero_crossings=hist.n_zero_crossings)
 
 
+def occupancy_grid(x: FloatArray, y: FloatArray, cell: float) -> tuple[float, IntArray, IntArray, IntArray]:
+    """The occupied cells of the ``(x, y)`` projection: ``(cell, kx, ky, first)``, the cell
+    edge used, each point's cell column and row, and one point index per occupied cell.
+
+    The cell is ``cell``, grown by sqrt(2) (at most :data:`CELL_MAX_STEPS` times) until
+    the occupied cells hold :data:`CELL_MIN_POINTS` points on average: a fixed cell
+    follows the scan's density where it is thinner than the cell (a far facade at 0.3 m
+    spacing in 0.1 m cells is a scatter of single points whose occupancy is noise).
+
+    Examples
+    --------
+    >>> def wall(spacing):  # 10 x 3 m
+    ...     t, z = np.meshgrid(np.arange(0, 10, spacing), np.arange(0, 3, spacing))
+    ...     return t.ravel(), z.ravel()
+    >>> round(occupancy_grid(*wall(0.02), 0.1)[0], 3), round(occupancy_grid(*wall(0.27), 0.1)[0], 3)
+    (0.1, 0.566)
+    """
+    x0, y0 = float(x.min()), float(y.min())
+    for step in range(CELL_MAX_STEPS + 1):
+        c = cell * 2.0 ** (0.5 * step)
+        kx = ((x - x0) * (1.0 / c)).astype(np.int64)
+        ky = ((y - y0) * (1.0 / c)).astype(np.int64)
+        _, first = np.unique(kx * (int(ky.max()) + 1) + ky, return_index=True)
+        if len(x) >= CELL_MIN_POINTS * len(first):
+            break
+    return c, kx, ky, first
+
+
 def occupancy_cut(x: FloatArray, y: FloatArray, params: SequenceParams, *,
                   open_high: bool = False, bands: bool = False) -> FloatArray | tuple[FloatArray, FloatArray]:
     """Cuts along ``x`` at the peaks of the wall's occupancy: how many cells of
-    ``params.cell`` x ``params.cell`` in the ``(x, y)`` projection hold a point, per
-    position along ``x``.
+    ``params.cell`` x ``params.cell`` (grown where the node is sparse: :func:`occupancy_grid`)
+    in the ``(x, y)`` projection hold a point, per position along ``x``.
 
     A plain count follows the scan's density, which is highest near each station, so
     on a wall scanned from a few stations its peaks are the stations, not the piers.
@@ -389,11 +425,8 @@ def occupancy_cut(x: FloatArray, y: FloatArray, params: SequenceParams, *,
     if params.cell <= 0:
         hist = v2(x, statistic="count", **kw)  # type: ignore[arg-type]
         return _cuts(hist, params.prominence, open_high, bands)
-    x0, y0 = float(x.min()), float(y.min())
-    kx = ((x - x0) * (1.0 / params.cell)).astype(np.int64)
-    ky = ((y - y0) * (1.0 / params.cell)).astype(np.int64)
-    _, first = np.unique(kx * (int(ky.max()) + 1) + ky, return_index=True)
-    n_fine = int(np.clip(np.ceil((float(x.max()) - x0) / params.cell), 16, 1024))
+    cell, kx, _, first = occupancy_grid(x, y, params.cell)
+    n_fine = int(np.clip(np.ceil((float(x.max()) - float(x.min())) / cell), 16, 1024))
     hist = v2(x[first], statistic="count", n_fine=n_fine, **kw)  # type: ignore[arg-type]
     return _cuts(hist, params.prominence, open_high, bands)
 
@@ -448,18 +481,19 @@ def gaps(xyz: npt.ArrayLike, *, params: SequenceParams | None = None) -> Proposa
         return None
     t, z = h(a).T
     t0, z0 = float(t.min()), float(z.min())
-    kx = ((t - t0) * (1.0 / params.cell)).astype(np.int64)
-    kz = ((z - z0) * (1.0 / params.cell)).astype(np.int64)
+    cell = params.cell  # not grown (occupancy_grid): a sparse node's stray points would fill a gap's columns
+    kx = ((t - t0) * (1.0 / cell)).astype(np.int64)
+    kz = ((z - z0) * (1.0 / cell)).astype(np.int64)
     _, first = np.unique(kx * (int(kz.max()) + 1) + kz, return_index=True)
     occ = np.bincount(kx[first], minlength=int(kx.max()) + 1).astype(np.float64)
     empty = occ < GAP_LEVEL * float(np.percentile(occ, 90))
     # Runs of empty columns: starts and ends (exclusive), inside the node (both ends occupied).
     d = np.diff(np.r_[0, empty.astype(np.int8), 0])
     start, stop = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
-    inner = (start > 0) & (stop < len(occ)) & ((stop - start) * params.cell >= params.gap)
+    inner = (start > 0) & (stop < len(occ)) & ((stop - start) * cell >= params.gap)
     if not inner.any():
         return None
-    cuts = t0 + 0.5 * (start[inner] + stop[inner]) * params.cell
+    cuts = t0 + 0.5 * (start[inner] + stop[inner]) * cell
     min_n = max(params.min_points, int(np.ceil(5 * params.min_child_fraction * len(a))))
     while len(cuts):
         counts = np.bincount(np.searchsorted(cuts, t), minlength=len(cuts) + 1)
