@@ -34,10 +34,10 @@ RESULTS = REPO / "benchmarks" / "results"
 LATEST = {
     "test": "generalize-test-tree-v24.json",
     "test-5m": "generalize-test-5m-forts-tree-v21.json",
-    "val-4m": "generalize-val-4m-tree-v24.json",
+    "val-4m": "generalize-val-4m-tree-v24-depth4.json",
     "val-1m": "generalize-val-density-1m-tree-v24.json",
     "val-10m": "generalize-val-density-10m-tree-v24.json",
-    "val": "generalize-val-tree-v24.json",
+    "val": "generalize-val-tree-v24-depth4.json",
     # the element check (tree.verify=true, not the default) on the same test sites
     "test-check": "generalize-test-check-tree-v22.json",
     "test-5m-check": "generalize-test-5m-check-tree-v22.json",
@@ -67,6 +67,7 @@ VAL_VARIANTS = {
     "generalize-val-4m-split-both.json": "rejected: split model fitted on those and the 52 random scenes, threshold 0.4",
     "generalize-val-4m-tree-v23.json": "`tree-v23`: instance samples drawn per group, not per batch",
     "generalize-val-4m-tree-v24.json": "`tree-v24`: occupancy cells grown where sparse, the gaps' fixed",
+    "generalize-val-4m-tree-v24-depth4.json": "`tree-v24`, deeper",
 }
 
 ELEMENTS = ("arch", "dome", "minaret", "pillar")

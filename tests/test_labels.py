@@ -253,7 +253,8 @@ def test_arcade_cells_reach_labels(tmp_path, scan, shallow, monkeypatch):
     xyz = np.column_stack([las.x, las.y, las.z]) - off
     wall = np.flatnonzero(plain["class"] == int(ClassId.WALL))
     p = xyz[wall[len(wall) // 2]]
-    cells = tr.ArcadeCells(np.array([[p[0], p[1], 0.6, 0.8]]), np.array([[-3.0, 3.0, -3.0, 3.0, p[2] - 3.0, p[2] + 3.0]]),
+    h = 3.0005  # off the scan's 1 mm grid: no point on a cell face, where rounding could put it either side
+    cells = tr.ArcadeCells(np.array([[p[0], p[1], 0.6, 0.8]]), np.array([[-h, h, -h, h, p[2] - h, p[2] + h]]),
                            np.array([10_000]), np.array([True]), np.array([False]))
     monkeypatch.setattr(tr, "arcade_cells", lambda samples, next_id, domes=None: (cells, {}))
     store, got = _run(tmp_path / "cells", scan, tree=SHALLOW)

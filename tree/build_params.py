@@ -29,7 +29,7 @@ class BuildParams(Params, owner="build_tree"):
         this; None = the model's own.
     """
 
-    max_depth: int = param(3, ge=0, doc="maximum depth d of Algorithm 1")
+    max_depth: int = param(4, ge=0, doc="maximum depth d of Algorithm 1")
     look_ahead: bool = param(
         True, doc="a storeys split that its own score rejects is kept when one of its storeys would split (into "
                   "bays): a storey cut is judged by what it leads to")
