@@ -60,8 +60,8 @@ SEQUENCES: tuple[int, ...] = (1, 2, 3)
 #: An occupancy cell of :func:`occupancy_cut` must hold this many points on
 #: average over the occupied cells; a sparser node's cells grow by sqrt(2) until they do
 #: (:func:`occupancy_grid`). With points spread evenly over a surface a cell of the
-#: surface then stays empty with a chance of about exp(-3) = 5 %, so a bay's pier is not
-#: read as an opening where the scan is thin.
+#: surface then stays empty with a chance of about exp(-3) = 5 %: an empty cell is an
+#: opening, not the scan's noise.
 CELL_MIN_POINTS = 3.0
 #: At most this many sqrt(2) steps (a cell of 16 x ``params.cell``).
 CELL_MAX_STEPS = 8
@@ -481,19 +481,19 @@ def gaps(xyz: npt.ArrayLike, *, params: SequenceParams | None = None) -> Proposa
         return None
     t, z = h(a).T
     t0, z0 = float(t.min()), float(z.min())
-    cell = params.cell  # not grown (occupancy_grid): a sparse node's stray points would fill a gap's columns
-    kx = ((t - t0) * (1.0 / cell)).astype(np.int64)
-    kz = ((z - z0) * (1.0 / cell)).astype(np.int64)
+    # The fixed cell, not occupancy_grid's: grown cells let a few stray points fill a gap's columns.
+    kx = ((t - t0) * (1.0 / params.cell)).astype(np.int64)
+    kz = ((z - z0) * (1.0 / params.cell)).astype(np.int64)
     _, first = np.unique(kx * (int(kz.max()) + 1) + kz, return_index=True)
     occ = np.bincount(kx[first], minlength=int(kx.max()) + 1).astype(np.float64)
     empty = occ < GAP_LEVEL * float(np.percentile(occ, 90))
     # Runs of empty columns: starts and ends (exclusive), inside the node (both ends occupied).
     d = np.diff(np.r_[0, empty.astype(np.int8), 0])
     start, stop = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
-    inner = (start > 0) & (stop < len(occ)) & ((stop - start) * cell >= params.gap)
+    inner = (start > 0) & (stop < len(occ)) & ((stop - start) * params.cell >= params.gap)
     if not inner.any():
         return None
-    cuts = t0 + 0.5 * (start[inner] + stop[inner]) * cell
+    cuts = t0 + 0.5 * (start[inner] + stop[inner]) * params.cell
     min_n = max(params.min_points, int(np.ceil(5 * params.min_child_fraction * len(a))))
     while len(cuts):
         counts = np.bincount(np.searchsorted(cuts, t), minlength=len(cuts) + 1)
