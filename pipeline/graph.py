@@ -4,7 +4,8 @@
 drivers (e.g. :func:`tiling.ingest.ingest`). Schedulers:
 
 - ``None``: a local Dask cluster of worker processes (``workers`` of them, one thread
-  each), started for the command and closed after it; its dashboard address is printed;
+  each), started for the command and closed after it; its dashboard address is printed
+  once and stays alive for the whole command;
 - ``"sync"``: every task in this process, one after another (tests, debugging);
 - an address (``tcp://host:8786``): an existing Dask scheduler; the store must be a path
   or URL that every worker reaches.
@@ -319,8 +320,8 @@ def fresh_workers(runner: Runner) -> None:
     by ``malloc_trim`` (a coarse task peaked 70-120 MB higher, a tree task 150-250 MB
     higher, in workers that had run the stage before; docs/decisions/speed-and-memory.md, "Fresh workers
     after every stage").
-    ``hollowtree run`` calls it after every stage that ran tasks. Takes 1.1-1.4 s
-    (a new local cluster, :class:`_LocalClient`).
+    ``hollowtree run`` calls it after every stage that ran tasks; the scheduler and its
+    dashboard stay (:class:`_LocalClient`).
     """
     restart = getattr(runner, "restart_workers", None)
     if restart is not None:
@@ -328,19 +329,23 @@ def fresh_workers(runner: Runner) -> None:
 
 
 class _LocalClient:
-    """A local cluster of this command and its client; :meth:`renew` replaces both, so the
-    next stage runs in new worker processes.
+    """A local cluster of this command and its client; :meth:`renew` gives the next stage
+    new worker processes under the same scheduler, so the dashboard's address printed at
+    the start stays alive to the end of the run.
 
-    A new cluster rather than new workers under the same scheduler: a nanny restart
-    (``client.restart()``) once left a run waiting 120 s for workers that never came
-    back, and scaling the workers to none and back raced the cluster's own bookkeeping
-    (a ``KeyError`` in ``SpecCluster._update_worker_status`` when the cluster closed;
-    dask/distributed#5407, #5919). Closing a cluster and starting one takes about as
-    long (1.1-1.3 s). Its dashboard address changes with it.
+    The nannies restart their workers (``Client.restart_workers``, about 0.7 s on 2
+    cores). Where that fails or times out (a nanny restart once left a run waiting for
+    workers that never came back), the whole cluster is replaced instead, as before,
+    and the new dashboard address is printed. Scaling the workers to none and back is
+    not used: it raced the cluster's own bookkeeping (a ``KeyError`` in
+    ``SpecCluster._update_worker_status`` on close; dask/distributed#5407, #5919).
     """
 
-    def __init__(self, workers: int, processes: bool) -> None:
-        self.workers, self.processes = workers, processes
+    #: Seconds a restart of the workers may take before the cluster is replaced instead.
+    RESTART_TIMEOUT = 60
+
+    def __init__(self, workers: int, processes: bool, progress: bool = False) -> None:
+        self.workers, self.processes, self.progress = workers, processes, progress
         self._start()
 
     def _start(self) -> None:
@@ -354,8 +359,17 @@ class _LocalClient:
         self.client = Client(self.cluster)
 
     def renew(self) -> None:
+        names = list(self.client.scheduler_info(n_workers=-1).get("workers", {}))
+        try:
+            self.client.restart_workers(names, timeout=self.RESTART_TIMEOUT)
+            self.client.wait_for_workers(self.workers, timeout=self.RESTART_TIMEOUT)
+            return
+        except Exception as e:  # noqa: BLE001 (any failure: a new cluster instead)
+            logger.warning("restarting the workers failed (%s); starting a new local cluster", e)
         self.close()
         self._start()
+        if self.progress:
+            print(f"dask dashboard (new cluster): {self.client.dashboard_link}", file=sys.stderr)
 
     def close(self) -> None:
         try:
@@ -465,7 +479,7 @@ def task_runner(
         quiet = contextlib.nullcontext() if processes else dask.config.set(
             {"distributed.worker.profile.enabled": False})
         with quiet, dask.config.set(_LOCAL_WORKER_CONFIG):
-            local = _LocalClient(workers, processes)
+            local = _LocalClient(workers, processes, progress)
             try:
                 if progress:
                     print(f"dask dashboard: {local.client.dashboard_link}", file=sys.stderr)

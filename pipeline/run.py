@@ -240,23 +240,23 @@ def run_workflow(
                     lrep = run_labels(url, use_tree=use_tree, runner=runner)
                 report.lines.append(lrep.summary())
                 say(report.lines[-1])
-            store = RunStore.open(url, mode="a")
-            store.update_attrs({"workflow": new_params})
-            report.class_counts = _class_counts(store)
-            if set(report.class_counts) <= {CLASS_NAMES[0]} and not use_tree:  # classes come from the tree
-                report.lines.append("labels: the tree is off (tree.enabled: false): every point keeps class 0, "
-                                    "with its coarse segment and primitive (labels/segment, labels/primitive)")
-                say(report.lines[-1])
-            elif set(report.class_counts) <= {CLASS_NAMES[0]}:  # nothing found: say so, once
-                report.lines.append(f"labels: nothing could be labelled in {report.class_counts.get(CLASS_NAMES[0], 0):,} "
-                                    "points (no surface or element found: too few, too sparse or too noisy points?); "
-                                    "every point keeps class 0")
-                say(report.lines[-1])
-            from hollowtree.pipeline.export import write_outputs
+                store = RunStore.open(url, mode="a")
+                store.update_attrs({"workflow": new_params})
+                report.class_counts = _class_counts(store)
+                if set(report.class_counts) <= {CLASS_NAMES[0]} and not use_tree:  # classes come from the tree
+                    report.lines.append("labels: the tree is off (tree.enabled: false): every point keeps class 0, "
+                                        "with its coarse segment and primitive (labels/segment, labels/primitive)")
+                    say(report.lines[-1])
+                elif set(report.class_counts) <= {CLASS_NAMES[0]}:  # nothing found: say so, once
+                    report.lines.append(f"labels: nothing could be labelled in {report.class_counts.get(CLASS_NAMES[0], 0):,} "
+                                        "points (no surface or element found: too few, too sparse or too noisy points?); "
+                                        "every point keeps class 0")
+                    say(report.lines[-1])
+                from hollowtree.pipeline.export import write_outputs
 
-            for line in write_outputs(store, wf, progress=progress):
-                report.lines.append(line)
-                say(line)
+                for line in write_outputs(store, wf, progress=progress):
+                    report.lines.append(line)
+                    say(line)
     finally:
         for folder in made_dirs:  # a run that wrote nothing (no scheduler, no input) leaves no folder behind
             _remove_if_empty(folder)

@@ -300,15 +300,46 @@ def test_fresh_workers_replaces_only_our_own_worker_processes():
         fresh_workers(run)
         assert run(os.getpid, [()], "pid") == [os.getpid()]
     with task_runner(None, workers=1, progress=False) as run:
-        before = run(os.getpid, [()], "pid")
+        before = run(_pid_and_scheduler, [()], "pid")
         fresh_workers(run)
-        after = run(os.getpid, [()], "pid")
-        fresh_workers(run)  # a second time too (a new local cluster each time)
-        again = run(os.getpid, [()], "pid")
-        assert not _alive(before[0])
-        assert not _alive(after[0])
-    assert len({*before, *after, *again}) == 3
-    assert os.getpid() not in before + after
+        after = run(_pid_and_scheduler, [()], "pid")
+        fresh_workers(run)  # a second time too
+        again = run(_pid_and_scheduler, [()], "pid")
+        assert not _alive(before[0][0])
+        assert not _alive(after[0][0])
+    pids = [r[0][0] for r in (before, after, again)]
+    assert len(set(pids)) == 3
+    assert os.getpid() not in pids
+    # new worker processes under the same scheduler: its dashboard lives through the run
+    assert len({r[0][1] for r in (before, after, again)}) == 1
+
+
+def _pid_and_scheduler() -> tuple[int, str]:
+    from distributed import get_worker
+
+    return os.getpid(), get_worker().scheduler.address
+
+
+def test_fresh_workers_replaces_the_cluster_where_a_restart_fails(monkeypatch, capsys):
+    """Where the nannies cannot restart their workers, a new local cluster takes over and
+    its dashboard address is printed."""
+    from distributed import Client
+
+    from hollowtree.pipeline.graph import fresh_workers, task_runner
+
+    def fail(self, *a, **k):
+        raise TimeoutError("no worker came back")
+
+    monkeypatch.setattr(Client, "restart_workers", fail)
+    with task_runner(None, workers=1, progress=True) as run:
+        before = run(_pid_and_scheduler, [()], "pid")
+        fresh_workers(run)
+        after = run(_pid_and_scheduler, [()], "pid")
+    assert before[0][0] != after[0][0]
+    assert before[0][1] != after[0][1]
+    err = capsys.readouterr().err
+    assert err.count("dask dashboard") == 2
+    assert "new cluster" in err
 
 
 _PREPARED: list[int] = []
