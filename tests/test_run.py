@@ -300,46 +300,41 @@ def test_fresh_workers_replaces_only_our_own_worker_processes():
         fresh_workers(run)
         assert run(os.getpid, [()], "pid") == [os.getpid()]
     with task_runner(None, workers=1, progress=False) as run:
-        before = run(_pid_and_scheduler, [()], "pid")
+        link = run.dashboard_link()
+        before = run(os.getpid, [()], "pid")
         fresh_workers(run)
-        after = run(_pid_and_scheduler, [()], "pid")
-        fresh_workers(run)  # a second time too
-        again = run(_pid_and_scheduler, [()], "pid")
-        assert not _alive(before[0][0])
-        assert not _alive(after[0][0])
-    pids = [r[0][0] for r in (before, after, again)]
-    assert len(set(pids)) == 3
-    assert os.getpid() not in pids
-    # new worker processes under the same scheduler: its dashboard lives through the run
-    assert len({r[0][1] for r in (before, after, again)}) == 1
+        after = run(os.getpid, [()], "pid")
+        fresh_workers(run)  # a second time too (a new local cluster each time)
+        again = run(os.getpid, [()], "pid")
+        assert not _alive(before[0])
+        assert not _alive(after[0])
+        # the address printed at the start stays the dashboard's
+        assert run.dashboard_link() == link
+    assert len({*before, *after, *again}) == 3
+    assert os.getpid() not in before + after
 
 
-def _pid_and_scheduler() -> tuple[int, str]:
-    from distributed import get_worker
+def test_a_new_cluster_whose_dashboard_port_is_taken_says_where_it_is(capsys):
+    """Where another process took the dashboard's port between two stages, the next
+    cluster serves it elsewhere and prints that address."""
+    import socket
+    from urllib.parse import urlparse
 
-    return os.getpid(), get_worker().scheduler.address
+    from hollowtree.pipeline.graph import _LocalClient
 
-
-def test_fresh_workers_replaces_the_cluster_where_a_restart_fails(monkeypatch, capsys):
-    """Where the nannies cannot restart their workers, a new local cluster takes over and
-    its dashboard address is printed."""
-    from distributed import Client
-
-    from hollowtree.pipeline.graph import fresh_workers, task_runner
-
-    def fail(self, *a, **k):
-        raise TimeoutError("no worker came back")
-
-    monkeypatch.setattr(Client, "restart_workers", fail)
-    with task_runner(None, workers=1, progress=True) as run:
-        before = run(_pid_and_scheduler, [()], "pid")
-        fresh_workers(run)
-        after = run(_pid_and_scheduler, [()], "pid")
-    assert before[0][0] != after[0][0]
-    assert before[0][1] != after[0][1]
-    err = capsys.readouterr().err
-    assert err.count("dask dashboard") == 2
-    assert "new cluster" in err
+    local = _LocalClient(1, True, progress=True)
+    try:
+        port = urlparse(local.client.dashboard_link).port
+        local.close()
+        with socket.socket() as s:
+            s.bind(("", port))
+            s.listen()
+            local._start()
+            assert urlparse(local.client.dashboard_link).port != port
+            assert local.client.submit(os.getpid).result() != os.getpid()
+    finally:
+        local.close()
+    assert f"port {port} was taken" in capsys.readouterr().err
 
 
 _PREPARED: list[int] = []
