@@ -40,6 +40,7 @@ if str(REPO) not in sys.path:
 import numpy as np  # noqa: E402
 
 from hollowtree.classes import ELEMENT_CLASSES, ClassId  # noqa: E402
+from hollowtree.pipeline.coarse import COARSE_ALGORITHM  # noqa: E402
 from hollowtree.pipeline.evaluate import evaluate_inputs  # noqa: E402
 from hollowtree.pipeline.tree_stage import TREE_ALGORITHM  # noqa: E402
 from hollowtree.scenes.procedural import FAMILIES, family_of, scan_draw, split_seeds  # noqa: E402
@@ -166,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
     out.write_text(json.dumps({"benchmark": "bench_generalize", "split": args.split, "family": args.family,
                                "overrides": args.overrides,
                                "seeds": seeds, "points": list(args.points), "workflow": "workflows/local.yaml",
-                               "tree_algorithm": TREE_ALGORITHM,
+                               "tree_algorithm": TREE_ALGORITHM, "coarse_algorithm": COARSE_ALGORITHM,
                                "totals": total, "families": fam, "visibility": visibility, "sites": sites,
                                "seconds": round(wall, 1)},
                               indent=1) + "\n")

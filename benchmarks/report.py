@@ -56,18 +56,20 @@ VAL_VARIANTS = {
     "generalize-val-4m-tree-v20.json": "`tree-v20`: the rest of a posts split cut into its parts",
     "generalize-val-4m-posts-from-domes.json": "rejected: posts from roots called dome only",
     "generalize-val-4m-three-posts.json": "rejected: at least three posts called pillar",
-    "generalize-val-4m-hn-p28.json": "rejected: HollowNet trained with 28 procedural training sites",
+    "generalize-val-4m-hn-p28.json": "rejected: HollowNet trained with 28 procedural sites",
     "generalize-val-4m-no-other-max-base.json": "rejected: without `tree.other_max_base`",
     "generalize-val-4m-tree-v21.json": "`tree-v21`: a minaret node's storeys cut judged by its bays",
     "generalize-val-4m-forts-tree-v20.json": "`tree-v20`, forts with bastions along their walls",
     "generalize-val-4m-forts-tree-v21.json": "`tree-v21`, forts with bastions along their walls",
     "generalize-val-4m-check30.json": "`tree-v22`'s element check fitted on 30 training sites, threshold 0.2",
-    "generalize-val-4m-split-proc.json": "rejected: split model fitted on 140 procedural training scans, threshold 0.35",
+    "generalize-val-4m-split-proc.json": "rejected: split model of 140 procedural training scans, threshold 0.35",
     "generalize-val-4m-split-proc-t05.json": "rejected: the same at threshold 0.5",
-    "generalize-val-4m-split-both.json": "rejected: split model fitted on those and the 52 random scenes, threshold 0.4",
+    "generalize-val-4m-split-both.json": "rejected: the same and 52 random scenes, threshold 0.4",
     "generalize-val-4m-tree-v23.json": "`tree-v23`: instance samples drawn per group, not per batch",
     "generalize-val-4m-tree-v24.json": "`tree-v24`: occupancy cells grown where sparse, the gaps' fixed",
     "generalize-val-4m-tree-v24-depth4.json": "`tree-v24`, deeper",
+    "generalize-val-4m-free-min-50.json": "rejected: free segments from 50 points",
+    "generalize-val-4m-coarse-v7.json": "`coarse-v7`: small free clusters spanning 50 cells of 0.1 m are segments",
 }
 
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
@@ -438,9 +440,10 @@ def derawar() -> str:
 # --- docs/decisions/method.md ------------------------------------------------------------
 
 def val_history() -> str:
-    """Every validation variant at 4 M points (14 sites): what was tried on the way to the tree."""
-    out = ["| variant | label run | arch | dome | minaret | pillar | found | precision | F1 | file |",
-           "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    """Every validation variant at 4 M points (14 sites): what was tried on the way to the tree
+    (its JSON: :data:`VAL_VARIANTS`)."""
+    out = ["| variant | arch | dome | minaret | pillar | found | precision | F1 |",
+           "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for name, what in VAL_VARIANTS.items():
         d = _load(name)
         t = d["totals"]["tree"]
@@ -449,8 +452,8 @@ def val_history() -> str:
         f1 = 2 * r * pr / (r + pr)
         per = [str(t[c]["found"]) for c in ELEMENTS]
         over = "".join(f" (`{re.sub(r'=/.*/', '=', o)}`)" for o in d.get("overrides", []))
-        out.append(f"| {what}{over} | `{d.get('tree_algorithm', '?')}` | " + " | ".join(per)
-                   + f" | {fd} / {gt} | {100 * pr:.1f} % | {f1:.3f} | `{name}` |")
+        out.append(f"| {what}{over} | " + " | ".join(per)
+                   + f" | {fd} / {gt} | {100 * pr:.1f} % | {f1:.3f} |")
     return "\n".join(out)
 
 

@@ -143,7 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
     _stage_flag(c, CoarseSection, "epsilon", "alpha", "cluster_epsilon", "min_support", "eps", "min_samples")
     c.add_argument("--no-free-segments", action="store_true",
                    help="leave points that no primitive explains unsegmented (default: DBSCAN them too)")
-    _stage_flag(c, CoarseSection, "free_min_points", "block_points", "block_margin", "sparse_factor", "group_gap",
+    _stage_flag(c, CoarseSection, "free_min_points", "free_min_cells", "block_points", "block_margin", "sparse_factor", "group_gap",
                 "seed")
     _set_flag(c, "coarse")
     _cluster_args(c)

@@ -305,8 +305,9 @@ FALLBACK_EPS = 0.3
 # coarse-v3: segments set in a wall join it, stacked groups join (group_set_in, group_stack);
 # coarse-v4: a free segment wider than STRIP_FACTOR x group_max_plane is large;
 # coarse-v6 (v5 named a trial that was dropped): a block whose context holds more than
-# CONTEXT_FACTOR x block_points is cut again (block_inputs).
-COARSE_ALGORITHM = "coarse-v6"
+# CONTEXT_FACTOR x block_points is cut again (block_inputs); coarse-v7: a small free
+# cluster that spans free_min_cells cells is a segment.
+COARSE_ALGORITHM = "coarse-v7"
 SPACING_WINDOWS = 1024
 WINDOW_ROWS = 1024
 

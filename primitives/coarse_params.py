@@ -97,8 +97,11 @@ class CoarseParams(Params, owner="coarse"):
         minaret whose stages are each below the minimum support, a small dome) still reach
         the tree and HollowNet. The paper leaves these points' fate open; without this
         they stay unsegmented and unlabelled.
-    free_min_points : int
-        Free clusters smaller than this stay unsegmented (scanner noise, stray points).
+    free_min_points, free_min_cells : int
+        Free clusters of fewer than ``free_min_points`` points that also span fewer than
+        ``free_min_cells`` cells of 0.1 m stay unsegmented (scanner noise, stray points,
+        shreds of a surface): a small cluster that spans many cells is a sparsely scanned
+        element (:func:`primitives.segment.small_free_clusters`). 0 cells = the count alone.
     seed : int
         Base seed; tile t uses ``SeedSequence([seed, t])``.
     angle_tol_deg, distance_tol, radius_tol : float
@@ -169,7 +172,10 @@ class CoarseParams(Params, owner="coarse"):
                               doc="DBSCAN radius, metres; null = 9 x the scan's 25 % 8-NN spacing")
     min_samples: int = param(10, **DBSCAN_ARGS["min_samples"].rule.bounds, doc="DBSCAN core threshold")
     free_segments: bool = param(True, doc="cluster the points no primitive explains into free segments too")
-    free_min_points: int = param(200, ge=1, doc="smallest free segment, points")
+    free_min_points: int = param(200, ge=1, doc="smallest free segment, points (but see free_min_cells)")
+    free_min_cells: int = param(
+        50, ge=0, doc="a free cluster under free_min_points is still a segment where it spans at least this many "
+                      "0.1 m cells (a sparsely scanned element); 0 = the count alone")
     seed: int = param(0, doc="base seed; tile t uses [seed, t]")
     angle_tol_deg: float = param(10.0, ge=0, workflow=False, doc="same primitive: axes within this, degrees")
     distance_tol: float = param(0.15, ge=0, workflow=False, doc="same primitive: positions within this, metres")

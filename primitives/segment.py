@@ -36,6 +36,11 @@ __all__ = ["CONTEXT_FACTOR", "PRIMITIVE_CODES", "CoarseParams", "block_inputs", 
 PRIMITIVE_CODES = {"plane": 1, "sphere": 2, "cylinder": 3, "cone": 4, "torus": 5}
 
 
+#: The cell, metres, in which ``free_min_cells`` counts the extent of a small free cluster
+#: (the tree's occupancy cell).
+FREE_CELL = 0.1
+
+
 def segment_points(xyz: np.ndarray, params: CoarseParams, eps: float, rng: np.random.Generator,
                     *, sparse_pass: bool = True) -> tuple[np.ndarray, list[dict[str, Any]], np.ndarray]:
     """Normals, Efficient RANSAC and DBSCAN on one set of points, then (``sparse_factor``)
@@ -71,8 +76,8 @@ def segment_points(xyz: np.ndarray, params: CoarseParams, eps: float, rng: np.ra
     segment = segment.astype(np.int64, copy=False)
     if params.free_segments and n:
         in_free = (groups == free) & (segment > 0)
-        sizes = np.bincount(segment[in_free], minlength=int(segment.max(initial=0)) + 1)
-        segment[in_free & (sizes[segment] < params.free_min_points)] = 0
+        small = small_free_clusters(xyz, segment, in_free, params)
+        segment[in_free & small[segment]] = 0
     # Dense ids 1..S (DBSCAN may leave gaps after the free filter).
     has = segment > 0
     ids, segment[has] = np.unique(segment[has], return_inverse=True)
@@ -103,6 +108,34 @@ def segment_points(xyz: np.ndarray, params: CoarseParams, eps: float, rng: np.ra
             if fits2:
                 segment, fits = join_passes(xyz, segment, fits, n1, eps * f, params)
     return segment, fits, no_normal
+
+
+def small_free_clusters(xyz: np.ndarray, segment: np.ndarray, in_free: np.ndarray,
+                        params: CoarseParams) -> np.ndarray:
+    """Which DBSCAN clusters of free points (``segment`` ids, ``in_free`` marking their
+    points) stay unsegmented: those under ``free_min_points`` points that also span fewer
+    than ``free_min_cells`` cells of :data:`FREE_CELL` metres. A count alone says little
+    across densities: 100 points are a shred of wall where a scan is dense and a whole
+    pillar where it is sparse; the cells they span tell the two apart.
+
+    >>> xyz = np.c_[np.arange(60) * 0.2, np.zeros(60), np.zeros(60)]  # 12 m, one point a cell
+    >>> small_free_clusters(xyz, np.ones(60, np.int64), np.ones(60, bool),
+    ...                     CoarseParams(free_min_points=200, free_min_cells=50)).tolist()
+    [True, False]
+    >>> small_free_clusters(xyz * 0.1, np.ones(60, np.int64), np.ones(60, bool),  # 1.2 m: 12 cells
+    ...                     CoarseParams(free_min_points=200, free_min_cells=50)).tolist()
+    [True, True]
+    """
+    sizes = np.bincount(segment[in_free], minlength=int(segment.max(initial=0)) + 1)
+    small = sizes < params.free_min_points
+    small[0] = True
+    rows = np.flatnonzero(in_free & small[segment])
+    if params.free_min_cells > 0 and len(rows):
+        cells = np.floor(xyz[rows] / FREE_CELL).astype(np.int64)
+        spans = np.unique(np.column_stack([segment[rows], cells]), axis=0)[:, 0]
+        small &= np.bincount(spans, minlength=len(small)) < params.free_min_cells
+        small[0] = True
+    return small
 
 
 def join_passes(xyz: np.ndarray, segment: np.ndarray, fits: list[dict[str, Any]], n1: int, gap: float,

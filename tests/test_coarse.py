@@ -420,6 +420,28 @@ def test_sparse_pass_segments_a_far_thin_surface():
     assert (two[: len(ground)] > 0).mean() > 0.9
 
 
+def test_a_small_sparse_element_is_a_segment_and_a_dense_shred_is_not():
+    """Free clusters under ``free_min_points`` points: a sparsely scanned column (120
+    points over 4 m) spans many cells and is a segment; a shred of the same count packed in
+    a hand's width stays unsegmented, as both do with ``free_min_cells`` 0."""
+    from hollowtree.primitives.segment import segment_points
+
+    rng = np.random.default_rng(3)
+    ground = np.c_[rng.uniform(-5, 5, (40_000, 2)), rng.normal(0, 0.002, 40_000)]
+    t, z = rng.uniform(0, 2 * np.pi, 120), rng.uniform(0.1, 4.0, 120)
+    column = np.c_[0.2 * np.cos(t), 0.2 * np.sin(t), z]
+    shred = np.c_[3.0, 3.0, 1.0] + rng.normal(0, 0.04, (120, 3))
+    xyz = np.r_[ground, column, shred]
+    col, shr = np.arange(40_000, 40_120), np.arange(40_120, 40_240)
+    seg, fits, _ = segment_points(xyz, CoarseParams(sparse_factor=0.0), 0.6, np.random.default_rng(0))
+    assert (seg[col] > 0).mean() > 0.9
+    assert fits[np.bincount(seg[col]).argmax() - 1]["kind"] == "free"
+    assert (seg[shr] == 0).all()
+    off, _, _ = segment_points(xyz, CoarseParams(sparse_factor=0.0, free_min_cells=0), 0.6, np.random.default_rng(0))
+    assert (off[col] == 0).all()
+    assert (off[shr] == 0).all()
+
+
 def test_sparse_part_of_a_plane_joins_its_dense_part():
     """Ground scanned densely near the station and sparsely beyond is one segment: the
     sparse pass's plane is joined to the first pass's where they touch and agree."""
