@@ -29,9 +29,6 @@ __all__ = ["TRAINING_SCENES", "file_groups", "fit_split_from_scenes", "procedura
 #: Scene numbers of the training set (module docstring).
 TRAINING_SCENES: tuple[int, ...] = tuple(range(40)) + tuple(range(100, 112))
 _WORKFLOW = shipped_workflows() / "local.yaml"
-#: Right and wrong split proposals a fit needs at least, each (fewer: a model of a handful
-#: of examples and a cross-validated AUC of nan).
-MIN_EACH = 5
 
 
 def _scene(i: int):  # type: ignore[no-untyped-def]
@@ -215,11 +212,9 @@ def fit_split_from_scenes(work: Path, *, scenes: tuple[int, ...] = TRAINING_SCEN
         ([f"{len(scenes)} random scenes"] if scenes else [])
         + ([f"{len(procedural)} procedural training sites ({procedural_points:,} points)"] if procedural else [])
         + ([f"{len(files)} labelled scans"] if files else []))
-    n_right = int(good.sum())
-    if min(n_right, len(good) - n_right) < MIN_EACH:
-        raise ConfigError(f"the scans give {len(samples)} split proposals, {n_right} of them right: the split model "
-                          f"needs at least {MIN_EACH} right and {MIN_EACH} wrong; add labelled scans or keep the "
-                          "synthetic scenes")
+    if good.all() or not good.any():
+        raise ConfigError(f"the scans give {len(samples)} split proposals, {int(good.sum())} of them right: the "
+                          "split model needs right and wrong ones; add labelled scans or keep the synthetic scenes")
     return fit_split_model(samples, seed=seed, threshold=threshold,
                            info={"classifier": "HollowNet (shipped weights)", "scenes": len(scenes),
                                  "procedural": list(procedural), "files": [str(f) for f in files], "data": data})

@@ -95,14 +95,17 @@ def test_fit_split_from_a_labelled_scan_and_run_with_the_model(labelled, tmp_pat
     assert f"tree.split_model: file {tmp_path / 'nope.json'} does not exist" in bad.stderr
 
 
-def test_fit_split_on_scans_with_too_few_right_splits_is_one_line(labelled, tmp_path):
-    """A scan whose groups give (almost) no right split cannot make a split model: one line,
-    exit 2, no file written."""
-    proc = _cli("fit-split", "--from", str(labelled / "lab.laz"), "--no-synthetic", "--work", str(tmp_path),
+def test_fit_split_on_scans_without_a_right_split_is_one_line(tmp_path):
+    """A scan whose groups give no right split (a lone minaret: every cut of it is wrong)
+    cannot make a split model: one line, exit 2, no file written."""
+    scan = tmp_path / "minaret.laz"
+    assert _cli("synth", "minaret", "--seed", "2", "--points", "60000", "--out", str(scan),
+                "--no-progress").returncode == 0
+    proc = _cli("fit-split", "--from", str(scan), "--no-synthetic", "--work", str(tmp_path / "work"),
                 "--out", str(tmp_path / "split.json"), "--no-progress")
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == [
-        next(line for line in proc.stderr.splitlines() if "split proposals" in line and "needs at least 5" in line)]
+        next(line for line in proc.stderr.splitlines() if "split proposals, 0 of them right" in line)]
     assert not (tmp_path / "split.json").exists()
 
 
