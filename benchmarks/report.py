@@ -32,17 +32,17 @@ RESULTS = REPO / "benchmarks" / "results"
 #: The latest run of each kind of element-recall result (``bench_generalize.py --json``).
 #: These are the figures of docs/generalize.md; edit the file names when a newer run replaces one.
 LATEST = {
-    "test": "generalize-test-tree-v24.json",
+    "test": "generalize-test-coarse-v7.json",
     "test-5m": "generalize-test-5m-forts-tree-v21.json",
-    "val-4m": "generalize-val-4m-tree-v24-depth4.json",
+    "val-4m": "generalize-val-4m-coarse-v7.json",
     "val-1m": "generalize-val-density-1m-tree-v24.json",
     "val-10m": "generalize-val-density-10m-tree-v24.json",
-    "val": "generalize-val-tree-v24-depth4.json",
+    "val": "generalize-val-coarse-v7.json",
     # the element check (tree.verify=true, not the default) on the same test sites
     "test-check": "generalize-test-check-tree-v22.json",
     "test-5m-check": "generalize-test-5m-check-tree-v22.json",
     # the latest run with the paper's energy path (other runs pass --no-energy)
-    "test-energy": "generalize-test-energy-tree-v24.json",
+    "test-energy": "generalize-test-coarse-v7.json",
 }
 
 #: What each validation variant of docs/decisions/method.md was (``generalize-val-4m*.json``).
@@ -107,6 +107,11 @@ def _points(d: dict) -> str:
     return _mega(lo) if lo == hi else f"{_mega(lo)[:-2]}-{_mega(hi)}"
 
 
+def _code(d: dict) -> str:
+    """The tree's label a run carried, and the coarse stage's where it was recorded."""
+    return ", ".join(f"`{d[k]}`" for k in ("tree_algorithm", "coarse_algorithm") if k in d) or "?"
+
+
 def _seeds(d: dict) -> str:
     s = d["seeds"]
     return f"{len(s)} ({_n(s[0])}-{_n(s[-1])})"
@@ -121,14 +126,14 @@ def generalize_figures() -> str:
             ("test-5m-check", "test split, 5 M points, `tree.verify: true`"),
             ("val", "validation"), ("val-4m", "validation, 4 M points"), ("val-1m", "validation, 1 M points"),
             ("val-10m", "validation, 10 M points")]
-    out = ["| sites | seeds | points per site | tree | arch | dome | minaret | pillar | all found | precision | source |",
+    out = ["| sites | seeds | points per site | code | arch | dome | minaret | pillar | all found | precision | source |",
            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for key, label in rows:
         d = _load(LATEST[key])
         t = d["totals"]["tree"]
         fd, gt, m, p = _found(t)
         per = [f"{t[c]['found']} / {t[c]['gt']}" for c in ELEMENTS]
-        out.append(f"| {label} | {_seeds(d)} | {_points(d)} | `{d['tree_algorithm']}` | " + " | ".join(per)
+        out.append(f"| {label} | {_seeds(d)} | {_points(d)} | {_code(d)} | " + " | ".join(per)
                    + f" | **{fd} / {gt} ({_pct(fd, gt)})** | **{_pct(m, p)}** | `{LATEST[key]}` |")
     return "\n".join(out)
 
@@ -141,12 +146,12 @@ def generalize_test() -> str:
     rows = [("default (split model)", d["totals"]["tree"], d, LATEST["test"]),
             ("coarse segments, each classified whole", d["totals"]["ransac+dbscan"], d, LATEST["test"]),
             ("paper's energy", e["totals"]["energy"], e, LATEST["test-energy"])]
-    out = ["| method | tree | arch | dome | minaret | pillar | all | precision | source |",
+    out = ["| method | code | arch | dome | minaret | pillar | all | precision | source |",
            "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for name, t, src, f in rows:
         fd, gt, m, p = _found(t)
         per = [f"{t[c]['found']} / {t[c]['gt']}" for c in ELEMENTS]
-        out.append(f"| {name} | `{src.get('tree_algorithm', '?')}` | " + " | ".join(per)
+        out.append(f"| {name} | {_code(src)} | " + " | ".join(per)
                    + f" | {fd} / {gt} ({_pct(fd, gt)}) | {_pct(m, p)} | `{f}` |")
     fams = []
     for fam, v in d["families"].items():
