@@ -35,8 +35,8 @@ LATEST = {
     "test": "generalize-test-coarse-v7.json",
     "test-5m": "generalize-test-5m-forts-tree-v21.json",
     "val-4m": "generalize-val-4m-coarse-v7.json",
-    "val-1m": "generalize-val-density-1m-tree-v24.json",
-    "val-10m": "generalize-val-density-10m-tree-v24.json",
+    "val-1m": "generalize-val-density-1m-coarse-v7.json",
+    "val-10m": "generalize-val-density-10m-coarse-v7.json",
     "val": "generalize-val-coarse-v7.json",
     # the element check (tree.verify=true, not the default) on the same test sites
     "test-check": "generalize-test-check-tree-v22.json",
