@@ -32,16 +32,14 @@ RESULTS = REPO / "benchmarks" / "results"
 #: The latest run of each kind of element-recall result (``bench_generalize.py --json``).
 #: These are the figures of docs/generalize.md; edit the file names when a newer run replaces one.
 LATEST = {
-    "test": "generalize-test-coarse-v7.json",
+    "test": "generalize-test-tree-v25.json",
     "test-5m": "generalize-test-5m-forts-tree-v21.json",
-    "val-4m": "generalize-val-4m-coarse-v7.json",
-    "val-1m": "generalize-val-density-1m-coarse-v7.json",
-    "val-10m": "generalize-val-density-10m-coarse-v7.json",
-    "val": "generalize-val-coarse-v7.json",
-    # the element check (tree.verify=true, not the default) on the same test sites
-    "test-check": "generalize-test-check-tree-v22.json",
-    "test-5m-check": "generalize-test-5m-check-tree-v22.json",
-    # the latest run with the paper's energy path (other runs pass --no-energy)
+    "val-4m": "generalize-val-4m-tree-v25.json",
+    "val-1m": "generalize-val-density-1m-tree-v25.json",
+    "val-10m": "generalize-val-density-10m-tree-v25.json",
+    "val": "generalize-val-tree-v25.json",
+    # the latest run with the paper's energy path (other runs pass --no-energy; it runs with
+    # tree.verify=false, so tree-v25 did not change it)
     "test-energy": "generalize-test-coarse-v7.json",
 }
 
@@ -70,6 +68,7 @@ VAL_VARIANTS = {
     "generalize-val-4m-tree-v24-depth4.json": "`tree-v24`, deeper",
     "generalize-val-4m-free-min-50.json": "rejected: free segments from 50 points",
     "generalize-val-4m-coarse-v7.json": "`coarse-v7`: small free clusters spanning 50 cells of 0.1 m are segments",
+    "generalize-val-4m-tree-v25.json": "`tree-v25`: the element check on by default, threshold 0.1",
 }
 
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
@@ -122,8 +121,6 @@ def _seeds(d: dict) -> str:
 def generalize_figures() -> str:
     """The headline of issue 43: found and precision per split and density."""
     rows = [("test", "test split"), ("test-5m", "test split, 5 M points"),
-            ("test-check", "test split, `tree.verify: true`"),
-            ("test-5m-check", "test split, 5 M points, `tree.verify: true`"),
             ("val", "validation"), ("val-4m", "validation, 4 M points"), ("val-1m", "validation, 1 M points"),
             ("val-10m", "validation, 10 M points")]
     out = ["| sites | seeds | points per site | code | arch | dome | minaret | pillar | all found | precision | source |",

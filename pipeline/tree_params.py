@@ -111,7 +111,7 @@ class TreeStageParams(Params, owner="tree"):
             "such test")
 
     verify: bool = param(
-        False, doc="the element check (tree/verify.py): a learned decision on every element instance after the "
+        True, doc="the element check (tree/verify.py): a learned decision on every element instance after the "
                    "merge, from its class, score, points, box and height above the ground; an instance it does not "
                    "believe becomes other, or takes the element class it believes")
     verify_model: str | None = param(

@@ -511,7 +511,8 @@ def test_export_keeps_the_users_data(tmp_path, scan):
 def test_the_element_checks_decision_reaches_labels(tmp_path, scan):
     """Every element instance takes the class the element check (tree/verify.py) gives it:
     a check that believes every instance a pillar makes them pillars, one that believes
-    none makes them other; points in no element instance keep their class."""
+    none makes them other; points in no element instance keep their class. The check runs
+    by default (``tree.verify`` unset)."""
     from hollowtree.classes import ELEMENT_CLASSES
     from hollowtree.tree.verify import VERIFY_FEATURES, ElementCheck, VerifyModel
 
@@ -526,8 +527,8 @@ def test_the_element_checks_decision_reaches_labels(tmp_path, scan):
                                                                               ClassId.OTHER)):
         path = tmp_path / f"check-{want.label}.json"
         ElementCheck(believed, threshold=0.5).save(path)
-        _, checked = _run(tmp_path / want.label, scan,
-                          tree=f"{{enabled: true, max_depth: 1, verify: true, verify_model: {path}}}")
+        on = "verify: true, " if want == ClassId.PILLAR else ""
+        _, checked = _run(tmp_path / want.label, scan, tree=f"{{enabled: true, max_depth: 1, {on}verify_model: {path}}}")
         assert (checked["class"][elements] == int(want)).all()
         np.testing.assert_array_equal(checked["class"][~elements], off["class"][~elements])
 
