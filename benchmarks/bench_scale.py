@@ -37,7 +37,7 @@ of the worker's resident memory (``_procs.tree_rss``).
 Run: ``python benchmarks/bench_scale.py [--sizes 1e6 1e7 1e8] [--workflow workflows/local.yaml]
 [--set key=value ...] [--workers 1 2] [--target 1.36e9] [--json FILE]``. Scans are cached in ``out/`` by the workflow's
 ``input.synth.out`` pattern; stores are written to ``out/scale-<N>.zarr`` and deleted
-first.
+first (kept after the run with ``--keep``).
 """
 
 from __future__ import annotations
@@ -203,6 +203,8 @@ def main() -> None:
                     help="run every size once per worker count (cluster.workers), side by side")
     ap.add_argument("--target", type=float, default=1.36e9,
                     help="points of the scan the recorded units project to on 64 workers (default 1.36e9)")
+    ap.add_argument("--keep", action="store_true",
+                    help="keep each run's store (out/scale-<N>.zarr) for `hollowtree status` and the predictor")
     ap.add_argument("--reference", type=Path, default=None,
                     help="LAZ/LAS file of the reference read (default: the scan nearest 10 M points)")
     args = ap.parse_args()
@@ -251,7 +253,8 @@ def main() -> None:
             print_projection(n_in, workers, proj)
             results.append({"points": n_in, "workers": workers, "wall_s": wall, "stages": rows,
                             "reference_read": before, "projection": proj})
-            shutil.rmtree(store, ignore_errors=True)
+            if not args.keep:
+                shutil.rmtree(store, ignore_errors=True)
     after = reference_read(ref)
     print(f"after the last run: reference read {after / 1e6:.2f} M points/s")
 

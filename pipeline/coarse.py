@@ -29,8 +29,8 @@ import pyarrow as pa
 
 from hollowtree.errors import ConfigError, PipelineError
 from hollowtree.pipeline.coarse_stitch import READ_ROWS, STITCH_STAGES, EdgeRows, stitch
-from hollowtree.pipeline.graph import in_child
-from hollowtree.pipeline.timing import UNIT_BALANCE, balance
+from hollowtree.pipeline.graph import Task, in_child, run_graph
+from hollowtree.pipeline.timing import UNIT_BALANCE, balance, unit_priority
 from hollowtree.primitives.dbscan import window_spacing
 from hollowtree.primitives.group import (
     segment_contacts_chunked,
@@ -442,24 +442,49 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     done = set(stage.done())
     todo = [t for t in tiles if str(t) not in done]
     # Tiles above block_points are cut into blocks, each a task of its own, so that a
-    # task's memory follows block_points rather than the densest tile; a second round
-    # joins each such tile's blocks. Largest units first (the longest tasks start first).
+    # task's memory follows block_points rather than the densest tile; a join task then
+    # makes the tile from its blocks. One graph of tasks (run_graph): a big tile's blocks
+    # start when its plan ends and its join when its blocks do, beside the other tiles'
+    # tasks, never waiting for a whole wave (pipeline.timing.PIPELINED). Each task runs
+    # in a child process of its worker (in_child): a worker's heap would keep what its
+    # earlier tasks left, and a later task peak 80-140 MB above the first.
     size = {t: int(done_ingest[str(t)].get("n_points", 0)) for t in todo}
     big = [t for t in todo if params.block_points and size[t] > params.block_points]
     planned = {k: int(v["n_blocks"]) for k, v in stage.done(PLAN_STAGE).items()}
     n_blocks = {t: planned[str(t)] for t in big if str(t) in planned}
-    unplanned = sorted((t for t in big if t not in n_blocks), key=lambda t: -size[t])
-    # Each task in a child process of its worker (in_child): a worker's heap would keep
-    # what its earlier tasks left, and a later task peak 80-140 MB above the first.
-    n_blocks.update(zip(unplanned, runner(in_child(plan_blocks), [(url, t, cfg) for t in unplanned],
-                                          "coarse: blocks"), strict=True))
     blocks_done = set(stage.done(BLOCK_STAGE))
-    units = [(size[t], t, -1) for t in todo if t not in n_blocks]
-    units += [(size[t] / n_blocks[t], t, b) for t in big for b in range(n_blocks[t]) if f"{t}.{b}" not in blocks_done]
-    units.sort(key=lambda u: -u[0])
-    runner(in_child(_coarse_unit, load_kernels), [(url, t, b, cfg) for _, t, b in units], "coarse: tiles")
-    if big:
-        runner(in_child(coarse_tile), [(url, t, cfg, n_blocks[t]) for t in big], "coarse: joins")
+    plan_fn, unit_fn, join_fn = in_child(plan_blocks), in_child(_coarse_unit, load_kernels), in_child(coarse_tile)
+    left: dict[int, int] = {}  # a big tile's blocks not ended yet
+
+    def unit(t: int, b: int) -> Task:
+        points = size[t] if b < 0 else size[t] // max(n_blocks[t], 1)
+        return Task(unit_fn, (url, t, b, cfg), unit_priority(STAGE, "tiles", points), ("unit", t, b), "coarse: tiles")
+
+    def blocks(t: int) -> list[Task]:
+        todo_b = [b for b in range(n_blocks[t]) if f"{t}.{b}" not in blocks_done]
+        left[t] = len(todo_b)
+        return [unit(t, b) for b in todo_b] or [
+            Task(join_fn, (url, t, cfg, n_blocks[t]), unit_priority(STAGE, "joins", size[t]), ("join", t), "coarse: joins")]
+
+    def then(tag: tuple[Any, ...], result: Any) -> list[Task]:
+        kind, t = tag[0], tag[1]
+        if kind == "plan":
+            n_blocks[t] = int(result)
+            return blocks(t)
+        if kind == "unit" and tag[2] >= 0:
+            left[t] -= 1
+            if not left[t]:
+                blocks_done.update(f"{t}.{b}" for b in range(n_blocks[t]))
+                return blocks(t)  # all recorded: the join
+        return []
+
+    first = [Task(plan_fn, (url, t, cfg), unit_priority(STAGE, "plan", size[t]), ("plan", t), "coarse: blocks")
+             for t in big if t not in n_blocks]
+    first += [unit(t, -1) for t in todo if t not in big]
+    for t in big:
+        if t in n_blocks:
+            first += blocks(t)
+    run_graph(runner, first, then, "coarse: tiles")
     t_stitch = time.perf_counter()
     if not todo and previous.get("params_hash") == h and "n_tile_segments" in previous:
         n_segments, n_keys = int(previous["n_segments"]), int(previous["n_tile_segments"])  # stitched before

@@ -30,17 +30,61 @@ import traceback
 import uuid
 import warnings
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from tqdm import tqdm
 
 from hollowtree.errors import PipelineError
 
-__all__ = ["fresh_workers", "in_child", "task_runner", "task_seconds", "timed_stage", "tune_process_for_streaming"]
+__all__ = ["Task", "fresh_workers", "in_child", "run_graph", "task_runner", "task_seconds", "timed_stage",
+           "tune_process_for_streaming"]
 
 logger = logging.getLogger(__name__)
 
 Runner = Callable[[Callable[..., Any], Sequence[tuple[Any, ...]], str], list[Any]]
+
+
+@dataclass(frozen=True)
+class Task:
+    """One task of :func:`run_graph`: ``fn(*args)``; ``priority``: higher runs first among
+    the tasks ready at once; ``tag``: what ``then`` gets back with its result; ``desc``:
+    the progress bar of a runner that runs the graph wave by wave (a plain callable)."""
+
+    fn: Callable[..., Any]
+    args: tuple[Any, ...]
+    priority: int = 0
+    tag: Any = None
+    desc: str = ""
+
+
+Then = Callable[[Any, Any], Sequence[Task]]
+
+
+def run_graph(runner: Runner, tasks: Sequence[Task], then: Then, desc: str) -> None:
+    """Run ``tasks``, and as each ends, the tasks ``then(tag, result)`` returns (tasks that
+    depend on it: the coarse stage's block tasks on their tile's plan, a tile's join on
+    its blocks), until none is left. A task starts as soon as it is made, beside the
+    others still running, instead of after a whole wave: a wave of a few long units no
+    longer keeps the other workers waiting.
+
+    The runners of :func:`task_runner` run the graph as it grows (``then`` in this process,
+    between two tasks' ends); any other runner (a plain callable) runs it wave by wave,
+    the tasks of a wave grouped by function and ``Task.desc``.
+    """
+    graph = getattr(runner, "graph", None)
+    if graph is not None:
+        graph(tasks, then, desc)
+        return
+    while tasks:
+        groups: dict[tuple[int, str], list[Task]] = {}
+        for t in sorted(tasks, key=lambda t: -t.priority):
+            groups.setdefault((id(t.fn), t.desc or desc), []).append(t)
+        follow: list[Task] = []
+        for (_, d), group in groups.items():
+            for t, result in zip(group, runner(group[0].fn, [t.args for t in group], d), strict=True):
+                follow.extend(then(t.tag, result))
+        tasks = follow
 
 
 @functools.lru_cache(maxsize=1)
@@ -385,9 +429,10 @@ def _bar(total: int, desc: str, progress: bool) -> tqdm:
                 leave=False, file=sys.stderr)
 
 
-def _timed(run: Callable[..., list[Any]]) -> Runner:
-    """``run`` that also counts the wall seconds spent in it (``task_seconds()``): the
-    time a stage's driver waited on its tasks, the rest of the stage being its own."""
+def _timed(run: Callable[..., list[Any]], graph: Callable[[Sequence[Task], Then, str], None]) -> Runner:
+    """``run`` (and its ``graph``, :func:`run_graph`) that also count the wall seconds
+    spent in them (``task_seconds()``): the time a stage's driver waited on its tasks,
+    the rest of the stage being its own."""
     spent = [0.0]
 
     def timed(fn: Callable[..., Any], args_list: Sequence[tuple[Any, ...]], desc: str) -> list[Any]:
@@ -397,7 +442,15 @@ def _timed(run: Callable[..., list[Any]]) -> Runner:
         finally:
             spent[0] += time.perf_counter() - t0
 
+    def timed_graph(tasks: Sequence[Task], then: Then, desc: str) -> None:
+        t0 = time.perf_counter()
+        try:
+            graph(tasks, then, desc)
+        finally:
+            spent[0] += time.perf_counter() - t0
+
     timed.task_seconds = lambda: spent[0]  # type: ignore[attr-defined]
+    timed.graph = timed_graph  # type: ignore[attr-defined]
     return timed
 
 
@@ -416,7 +469,25 @@ def _sync_runner(progress: bool) -> Runner:
                 bar.update(1)
         return out
 
-    return _timed(run)
+    def graph(tasks: Sequence[Task], then: Then, desc: str) -> None:
+        import heapq
+
+        ready = [(-t.priority, i, t) for i, t in enumerate(tasks)]
+        heapq.heapify(ready)
+        made = len(ready)
+        with _bar(made, desc, progress) as bar:
+            while ready:
+                _, _, t = heapq.heappop(ready)
+                follow = then(t.tag, t.fn(*t.args))
+                for f in follow:
+                    heapq.heappush(ready, (-f.priority, made, f))
+                    made += 1
+                if follow:
+                    bar.total += len(follow)
+                    bar.refresh()
+                bar.update(1)
+
+    return _timed(run, graph)
 
 
 def _client_runner(client_of: Callable[[], Any], progress: bool) -> Runner:
@@ -439,7 +510,54 @@ def _client_runner(client_of: Callable[[], Any], progress: bool) -> Runner:
         finally:
             client.cancel([f for f in futures if not f.done()])
 
-    return _timed(run)
+    def graph(tasks: Sequence[Task], then: Then, desc: str) -> None:
+        # The driver is the list scheduler here: a task is submitted only when a worker
+        # thread is free for it, the ready task of the highest priority first. Dask would
+        # otherwise place a task made later (a block after its plan) on a busy worker whose
+        # task it expects to end soon (it estimates a task's seconds by its function's
+        # average), where it waits while another worker idles.
+        import heapq
+
+        from distributed import wait
+
+        if not tasks:
+            return
+        client = client_of()
+        ready = [(-t.priority, i, t) for i, t in enumerate(tasks)]
+        heapq.heapify(ready)
+        made = len(ready)
+        live: dict[str, tuple[Any, Any]] = {}  # key -> (future, tag) of the tasks submitted, not ended
+        try:
+            with _bar(made, desc, progress) as bar:
+                while ready or live:
+                    free = max(sum(client.nthreads().values()), 1) - len(live)
+                    while ready and free > 0:
+                        _, _, t = heapq.heappop(ready)
+                        name = getattr(t.fn, "__name__", "task")
+                        fut = client.submit(_run_and_trim, t.fn, *t.args, key=f"{name}-{uuid.uuid4().hex}",
+                                            priority=t.priority)
+                        live[fut.key] = (fut, t.tag)
+                        free -= 1
+                    try:  # a second at most: a worker that joins meanwhile gets a task
+                        ended = wait([f for f, _ in live.values()], timeout=1.0, return_when="FIRST_COMPLETED").done
+                    except TimeoutError:
+                        continue
+                    for fut in ended:
+                        if fut.status == "error":
+                            fut.result()  # raises the task's own exception
+                        _, tag = live.pop(fut.key)
+                        follow = then(tag, fut.result())
+                        for f in follow:
+                            heapq.heappush(ready, (-f.priority, made, f))
+                            made += 1
+                        if follow:
+                            bar.total += len(follow)
+                            bar.refresh()
+                        bar.update(1)
+        finally:
+            client.cancel([f for f, _ in live.values() if not f.done()])
+
+    return _timed(run, graph)
 
 
 @contextlib.contextmanager
