@@ -350,12 +350,7 @@ def load_workflow(path: str | Path, overrides: Sequence[str] = (), *, check_file
         more = f" (and {exc.error_count() - 1} more)" if exc.error_count() > 1 else ""
         raise WorkflowError(f"{path}{where}: {key or '(top level)'}: {msg}{more}") from None
     if check_files:
-        for key in ("weights", "split_model"):
-            f = getattr(wf.tree, key)
-            if f is not None and not Path(f).is_file():
-                line = _line_of(node, ["tree", key])
-                where = f":{line}" if line is not None else ""
-                raise WorkflowError(f"{path}{where}: tree.{key}: file {f} does not exist")
+        _check_tree_files(wf, path, node, overrides)
     if check_files and wf.input.files:
         for i, f in enumerate(wf.input.files):
             if not Path(f).is_file():
@@ -363,6 +358,31 @@ def load_workflow(path: str | Path, overrides: Sequence[str] = (), *, check_file
                 where = f":{line}" if line is not None else ""
                 raise WorkflowError(f"{path}{where}: input.files[{i}]: file {f} does not exist")
     return wf
+
+
+def _check_tree_files(wf: Workflow, path: Path | str, node: Any, overrides: Sequence[str]) -> None:
+    """The tree's files, before any stage runs: each named file exists, and the split
+    model and element check the run will use are readable (a bad file would otherwise
+    stop the run only when the tree stage starts, after ingest and coarse)."""
+    t = wf.tree
+    for key in ("weights", "split_model", "verify_model"):
+        f = getattr(t, key)
+        setby = next((a for a in overrides if a.partition("=")[0].strip() == f"tree.{key}"), None)
+        line = None if setby else _line_of(node, ["tree", key])
+        where = f":{line}" if line is not None else ""
+        said = f" (from --set {setby})" if setby else ""
+        if f is not None and not Path(f).is_file():
+            raise WorkflowError(f"{path}{where}: tree.{key}: file {f} does not exist{said}")
+        used = {"split_model": t.decision == "split-model", "verify_model": t.verify}.get(key, False)
+        if f is None or not t.enabled or not used:
+            continue
+        from hollowtree.tree.split import load_split_model
+        from hollowtree.tree.verify import load_verify_model
+
+        try:
+            (load_split_model if key == "split_model" else load_verify_model)(f)
+        except ConfigError as e:
+            raise WorkflowError(f"{path}{where}: tree.{key}: {e}{said}") from None
 
 
 def shipped_workflows() -> Path:

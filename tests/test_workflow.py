@@ -173,3 +173,23 @@ def test_an_install_is_one_package_named_hollowtree(tmp_path):
     assert Path(built).is_relative_to(pkg)
     assert Path(flows) == pkg / "workflows"
     assert api == "hollowtree.api"
+
+
+@pytest.mark.parametrize(("key", "content", "expected"), [
+    ("verify_model", None, r"wf.yaml:7: tree.verify_model: file .*nope.json does not exist"),
+    ("verify_model", "{not json", r"wf.yaml:7: tree.verify_model: .*nope.json is not a readable element check"),
+    ("split_model", '{"models": 3}', r"wf.yaml:7: tree.split_model: .*nope.json is not a readable split model"),
+])
+def test_the_trees_files_are_checked_before_any_stage_runs(tmp_path, key, content, expected):
+    """A missing or unreadable model file stops the run at once, naming the key and line
+    (not when the tree stage starts, after ingest and coarse)."""
+    bad = tmp_path / "nope.json"
+    if content is not None:
+        bad.write_text(content)
+    path = _write(tmp_path, GOOD.replace("STORE", str(tmp_path / "s.zarr")) + f"tree:\n  {key}: {bad}\n")
+    with pytest.raises(WorkflowError, match=expected) as info:
+        load_workflow(path)
+    assert "\n" not in str(info.value)
+    if content is not None:  # a file the run will not use is not read
+        off = "tree.verify=false" if key == "verify_model" else "tree.decision=energy"
+        assert getattr(load_workflow(path, [off]).tree, key) == str(bad)

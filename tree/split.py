@@ -40,6 +40,7 @@ import numpy.typing as npt
 
 from hollowtree.arrays import FloatArray
 from hollowtree.classes import CLASS_NAMES, ELEMENT_CLASSES, NUM_CLASSES
+from hollowtree.errors import ConfigError
 
 __all__ = ["DEFAULT_SPLIT_PATH", "FEATURE_NAMES", "N_PROBS", "SplitModel", "load_split_model", "split_features"]
 
@@ -249,4 +250,8 @@ def load_split_model(path: str | Path | None = None) -> SplitModel:
 
 @functools.lru_cache(maxsize=4)
 def _load(path: str) -> SplitModel:
-    return SplitModel.from_dict(json.loads(Path(path).read_text()))
+    try:
+        return SplitModel.from_dict(json.loads(Path(path).read_text()))
+    except (OSError, ValueError, KeyError, TypeError, IndexError) as e:
+        reason = e.strerror if isinstance(e, OSError) and e.strerror else e
+        raise ConfigError(f"{path} is not a readable split model: {reason}") from None
