@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import heapq
 import logging
 import os
 import pickle
@@ -61,12 +62,38 @@ class Task:
 Then = Callable[[Any, Any], Sequence[Task]]
 
 
+class _Ready:
+    """The tasks of a graph made and not started, the highest priority first (then the
+    first made), with the progress bar that counts every task made."""
+
+    def __init__(self, tasks: Sequence[Task], bar: tqdm) -> None:
+        self.heap = [(-t.priority, i, t) for i, t in enumerate(tasks)]
+        heapq.heapify(self.heap)
+        self.made, self.bar = len(self.heap), bar
+
+    def __bool__(self) -> bool:
+        return bool(self.heap)
+
+    def pop(self) -> Task:
+        return heapq.heappop(self.heap)[2]
+
+    def ended(self, follow: Sequence[Task]) -> None:
+        """A task ended and made ``follow``."""
+        for f in follow:
+            heapq.heappush(self.heap, (-f.priority, self.made, f))
+            self.made += 1
+        if follow:
+            self.bar.total += len(follow)
+            self.bar.refresh()
+        self.bar.update(1)
+
+
 def run_graph(runner: Runner, tasks: Sequence[Task], then: Then, desc: str) -> None:
     """Run ``tasks``, and as each ends, the tasks ``then(tag, result)`` returns (tasks that
     depend on it: the coarse stage's block tasks on their tile's plan, a tile's join on
-    its blocks), until none is left. A task starts as soon as it is made, beside the
-    others still running, instead of after a whole wave: a wave of a few long units no
-    longer keeps the other workers waiting.
+    its blocks), until none is left. A task starts as soon as it is made and a worker is
+    free, beside the others still running, instead of after a whole wave: a wave of a few
+    long units no longer keeps the other workers waiting.
 
     The runners of :func:`task_runner` run the graph as it grows (``then`` in this process,
     between two tasks' ends); any other runner (a plain callable) runs it wave by wave,
@@ -470,22 +497,11 @@ def _sync_runner(progress: bool) -> Runner:
         return out
 
     def graph(tasks: Sequence[Task], then: Then, desc: str) -> None:
-        import heapq
-
-        ready = [(-t.priority, i, t) for i, t in enumerate(tasks)]
-        heapq.heapify(ready)
-        made = len(ready)
-        with _bar(made, desc, progress) as bar:
+        with _bar(len(tasks), desc, progress) as bar:
+            ready = _Ready(tasks, bar)
             while ready:
-                _, _, t = heapq.heappop(ready)
-                follow = then(t.tag, t.fn(*t.args))
-                for f in follow:
-                    heapq.heappush(ready, (-f.priority, made, f))
-                    made += 1
-                if follow:
-                    bar.total += len(follow)
-                    bar.refresh()
-                bar.update(1)
+                t = ready.pop()
+                ready.ended(then(t.tag, t.fn(*t.args)))
 
     return _timed(run, graph)
 
@@ -516,23 +532,19 @@ def _client_runner(client_of: Callable[[], Any], progress: bool) -> Runner:
         # otherwise place a task made later (a block after its plan) on a busy worker whose
         # task it expects to end soon (it estimates a task's seconds by its function's
         # average), where it waits while another worker idles.
-        import heapq
-
         from distributed import wait
 
         if not tasks:
             return
         client = client_of()
-        ready = [(-t.priority, i, t) for i, t in enumerate(tasks)]
-        heapq.heapify(ready)
-        made = len(ready)
         live: dict[str, tuple[Any, Any]] = {}  # key -> (future, tag) of the tasks submitted, not ended
         try:
-            with _bar(made, desc, progress) as bar:
+            with _bar(len(tasks), desc, progress) as bar:
+                ready = _Ready(tasks, bar)
                 while ready or live:
                     free = max(sum(client.nthreads().values()), 1) - len(live)
                     while ready and free > 0:
-                        _, _, t = heapq.heappop(ready)
+                        t = ready.pop()
                         name = getattr(t.fn, "__name__", "task")
                         fut = client.submit(_run_and_trim, t.fn, *t.args, key=f"{name}-{uuid.uuid4().hex}",
                                             priority=t.priority)
@@ -546,14 +558,7 @@ def _client_runner(client_of: Callable[[], Any], progress: bool) -> Runner:
                         if fut.status == "error":
                             fut.result()  # raises the task's own exception
                         _, tag = live.pop(fut.key)
-                        follow = then(tag, fut.result())
-                        for f in follow:
-                            heapq.heappush(ready, (-f.priority, made, f))
-                            made += 1
-                        if follow:
-                            bar.total += len(follow)
-                            bar.refresh()
-                        bar.update(1)
+                        ready.ended(then(tag, fut.result()))
         finally:
             client.cancel([f for f, _ in live.values() if not f.done()])
 
