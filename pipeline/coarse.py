@@ -460,8 +460,9 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     left: dict[int, int] = {}  # a big tile's blocks not ended yet
 
     def unit(t: int, b: int) -> Task:
-        points = size[t] if b < 0 else size[t] // max(n_blocks[t], 1)
-        return Task(unit_fn, (url, t, b, cfg), unit_priority(STAGE, "tiles", points), ("unit", t, b), "coarse: tiles")
+        # A block goes by its tile's points, like a whole tile: the tile ends (its join)
+        # only when its last block does (pipeline.timing.unit_priority).
+        return Task(unit_fn, (url, t, b, cfg), unit_priority(STAGE, "tiles", size[t]), ("unit", t, b), "coarse: tiles")
 
     def blocks(t: int) -> list[Task]:
         todo_b = [b for b in range(n_blocks[t]) if f"{t}.{b}" not in blocks_done]
