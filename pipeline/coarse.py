@@ -31,7 +31,7 @@ from hollowtree.errors import ConfigError, PipelineError
 from hollowtree.pipeline.coarse_stitch import READ_ROWS, STITCH_STAGES, EdgeRows, stitch
 from hollowtree.pipeline.graph import Task, in_child, run_graph
 from hollowtree.pipeline.timing import UNIT_BALANCE, balance, unit_priority
-from hollowtree.primitives.dbscan import window_spacing
+from hollowtree.primitives.dbscan import spacing_quantile, window_distances
 from hollowtree.primitives.group import (
     segment_contacts_chunked,
 )
@@ -314,19 +314,16 @@ SPACING_WINDOWS = 1024
 WINDOW_ROWS = 1024
 
 
-def scan_spacing(store: RunStore, sizes: dict[int, int], *, seed: int = 0) -> float | None:
-    """The scan's point spacing for the automatic eps: the ``EPS_QUANTILE`` of the 8-NN
-    distance over ``SPACING_WINDOWS`` windows of ``WINDOW_ROWS`` consecutive tile rows,
-    whose starts are drawn uniformly over all the scan's kept points (``sizes``: points
-    per tile), so a tile is measured in proportion to its points. Tile rows are
-    Morton-sorted, so a window is a compact piece of surface and a point's neighbours are
-    its true neighbours. Reads only the windows (a few MB), never a whole tile. None when
-    the scan has no spacing to measure: fewer than 9 points, no window with 9 points, or
-    nothing but exact duplicates (the caller then falls back to a fixed eps).
-    """
+#: Tasks the spacing's windows are measured in (:func:`scan_spacing`): consecutive runs of
+#: the windows in tile and row order, of equal counts, so no task stands out.
+SPACING_UNITS = 16
+#: Records of the spacing's tasks (unit ``"<k>"``): their timing, for the predictor.
+SPACING_STAGE = "coarse.spacing"
+
+
+def _spacing_windows(sizes: dict[int, int], seed: int) -> list[tuple[int, int]]:
+    """The windows of :func:`scan_spacing`: ``(tile, first row)``, in tile and row order."""
     tiles = sorted(t for t, n in sizes.items() if n > 0)
-    if sum(sizes[t] for t in tiles) <= 8:
-        return None
     counts = np.array([sizes[t] for t in tiles], dtype=np.int64)
     cum = np.r_[0, np.cumsum(counts)]
     rng = np.random.default_rng(np.random.SeedSequence([seed, 8]))
@@ -336,12 +333,19 @@ def scan_spacing(store: RunStore, sizes: dict[int, int], *, seed: int = 0) -> fl
         i = int(np.searchsorted(cum, p, side="right")) - 1
         n, r = int(counts[i]), p - int(cum[i])
         starts.add((tiles[i], max(0, min(r - WINDOW_ROWS // 2, n - WINDOW_ROWS))))
+    return sorted(starts)
+
+
+def window_distances_task(url: str, k: int, windows: list[tuple[int, int]], sizes: dict[int, int]) -> np.ndarray:
+    """Dask task: the 8-NN distances of the core rows of ``windows`` (``(tile, first
+    row)`` each, :func:`_spacing_windows`), reading each chunk of a tile's arrays once;
+    records its timing as unit ``k`` of ``SPACING_STAGE``."""
+    store = RunStore.open(url, mode="a")
     scale = np.asarray(store.attrs["coords"]["scale"])
 
-    def windows() -> Any:
-        # Windows in row order; each chunk of the tile's arrays is read (decoded) once.
+    def read() -> Any:
         cached: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
-        for t, a in sorted(starts):
+        for t, a in windows:
             b = min(sizes[t], a + WINDOW_ROWS)
             parts = []
             for c in range(a // CHUNK_POINTS, (b - 1) // CHUNK_POINTS + 1):
@@ -351,14 +355,41 @@ def scan_spacing(store: RunStore, sizes: dict[int, int], *, seed: int = 0) -> fl
                     lo, hi = c * CHUNK_POINTS, min(sizes[t], (c + 1) * CHUNK_POINTS)
                     cached[(t, c)] = (store.read_slice(f"tiles/{t}/xyz", lo, hi),
                                       store.read_slice(f"tiles/{t}/core", lo, hi))
-                x, k = cached[(t, c)]
+                x, m = cached[(t, c)]
                 lo = c * CHUNK_POINTS
-                parts.append((x[max(a, lo) - lo:b - lo], k[max(a, lo) - lo:b - lo]))
-            xyz = np.concatenate([x for x, _ in parts]).astype(np.float64) * scale
-            yield xyz, np.concatenate([k for _, k in parts])
+                parts.append((x[max(a, lo) - lo:b - lo], m[max(a, lo) - lo:b - lo]))
+            yield (np.concatenate([x for x, _ in parts]).astype(np.float64) * scale,
+                   np.concatenate([m for _, m in parts]))
 
+    d = window_distances(read(), k=8)
+    store.record(SPACING_STAGE, str(k), {"n_points": len(windows) * WINDOW_ROWS, "n_windows": len(windows)})
+    return d
+
+
+def scan_spacing(store: RunStore, sizes: dict[int, int], *, seed: int = 0, runner: Any = None) -> float | None:
+    """The scan's point spacing for the automatic eps: the ``EPS_QUANTILE`` of the 8-NN
+    distance over ``SPACING_WINDOWS`` windows of ``WINDOW_ROWS`` consecutive tile rows,
+    whose starts are drawn uniformly over all the scan's kept points (``sizes``: points
+    per tile), so a tile is measured in proportion to its points. Tile rows are
+    Morton-sorted, so a window is a compact piece of surface and a point's neighbours are
+    its true neighbours. Reads only the windows (a few MB), never a whole tile; the
+    windows are measured in ``SPACING_UNITS`` tasks of ``runner`` (in this process
+    without one) and their distances pooled: the same value as one pass over them all.
+    None when the scan has no spacing to measure: fewer than 9 points, no window with 9
+    points, or nothing but exact duplicates (the caller then falls back to a fixed eps).
+    """
+    if sum(n for n in sizes.values() if n > 0) <= 8:
+        return None
+    windows = _spacing_windows(sizes, seed)
+    n_units = min(SPACING_UNITS, len(windows))
+    units = [(store.url, k, windows[k * len(windows) // n_units:(k + 1) * len(windows) // n_units], sizes)
+             for k in range(n_units)]
+    if runner is None:
+        found = [window_distances_task(*u) for u in units]
+    else:
+        found = runner(window_distances_task, units, "coarse: spacing")
     try:
-        return window_spacing(windows(), k=8, quantile=EPS_QUANTILE)
+        return spacing_quantile(found, k=8, quantile=EPS_QUANTILE)
     except ConfigError:  # no distinct neighbours anywhere in the windows
         return None
 
@@ -423,7 +454,7 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     spacing = None
     if eps is None or cluster_epsilon is None:
         sizes = {t: int(done_ingest[str(t)].get("n_points", 0)) for t in tiles}
-        spacing = scan_spacing(store, sizes, seed=params.seed)
+        spacing = scan_spacing(store, sizes, seed=params.seed, runner=runner)
         if spacing is not None and spacing > MAX_SPACING:
             logger.warning("%s: the scan's points are %.2f m apart (8-NN spacing, 25 %% quantile): hollowtree is "
                            "made for terrestrial scans of buildings, a few cm apart, and will label a scan this "

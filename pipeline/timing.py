@@ -41,6 +41,7 @@ WAVES = (
     ("ingest", "tiles", "ingest"),
     ("ingest", "tiles", "ingest.parts"),
     ("ingest", "copies", "ingest.copies"),
+    ("coarse", "spacing", "coarse.spacing"),
     ("coarse", "plan", "coarse.plan"),
     ("coarse", "tiles", "coarse.blocks"),
     ("coarse", "tiles", "coarse"),

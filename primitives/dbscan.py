@@ -36,7 +36,8 @@ from hollowtree.primitives._validation import as_xyz as _as_xyz
 from hollowtree.primitives.coarse_params import DBSCAN_ARGS
 from hollowtree.primitives.stitch import UnionFind
 
-__all__ = ["dbscan_labels", "dbscan_segments", "default_eps", "sparse_points", "window_spacing"]
+__all__ = ["dbscan_labels", "dbscan_segments", "default_eps", "sparse_points", "spacing_quantile",
+           "window_distances", "window_spacing"]
 
 # Point pairs tested at once (bounds the temporary arrays: about 100 bytes per pair).
 _PAIR_BUDGET = 1 << 19
@@ -495,10 +496,26 @@ def window_spacing(windows: Iterable[tuple[npt.ArrayLike, npt.ArrayLike]], *, k:
     >>> window_spacing([(line, np.ones(20, bool))], k=3, quantile=0.5)
     1.0
     """
-    func = "window_spacing"
-    check_args(DBSCAN_ARGS, func, k=k, quantile=quantile)
-    k = int(k)
-    found = []
+    check_args(DBSCAN_ARGS, "window_spacing", k=k, quantile=quantile)
+    return spacing_quantile([_distances(windows, int(k), "window_spacing")], k=k, quantile=quantile)
+
+
+def window_distances(windows: Iterable[tuple[npt.ArrayLike, npt.ArrayLike]], *, k: int = 8) -> FloatArray:
+    """The ``k``-th nearest neighbour distance of every measured row of ``windows``
+    (:func:`window_spacing`), pooled in window order; windows of ``k`` points or fewer,
+    or without a measured row, give none. Pieces of one scan's windows measured apart
+    (tasks) and pooled give :func:`window_spacing`'s answer through :func:`spacing_quantile`.
+
+    >>> line = np.c_[np.arange(6) * 0.5, np.zeros(6), np.zeros(6)]
+    >>> window_distances([(line, np.ones(6, bool))], k=2).tolist()
+    [1.0, 0.5, 0.5, 0.5, 0.5, 1.0]
+    """
+    check_args(DBSCAN_ARGS, "window_distances", k=k)
+    return _distances(windows, int(k), "window_distances")
+
+
+def _distances(windows: Iterable[tuple[npt.ArrayLike, npt.ArrayLike]], k: int, func: str) -> FloatArray:
+    found = [np.zeros(0)]
     for xyz, mask in windows:
         pts = _as_xyz(xyz, func)
         m = np.asarray(mask, dtype=bool).reshape(-1)
@@ -508,11 +525,25 @@ def window_spacing(windows: Iterable[tuple[npt.ArrayLike, npt.ArrayLike]], *, k:
         if len(pts) <= k or not m.any():
             continue
         found.append(cKDTree(pts, balanced_tree=False).query(pts[m], k=[k + 1], workers=-1)[0][:, 0])
-    if not found:
+    return np.concatenate(found)
+
+
+def spacing_quantile(distances: Iterable[npt.ArrayLike], *, k: int = 8, quantile: float = 0.25) -> float:
+    """The ``quantile`` of pooled :func:`window_distances` (one array or several), zero
+    distances (a point with ``k`` exact duplicates) left out.
+
+    Raises
+    ------
+    ConfigError
+        If ``quantile`` breaks its rule, no distance was measured, or every one is zero.
+    """
+    func = "window_spacing"
+    check_args(DBSCAN_ARGS, func, k=k, quantile=quantile)
+    pooled = np.concatenate([np.asarray(d, dtype=np.float64).reshape(-1) for d in distances] or [np.zeros(0)])
+    if not len(pooled):
         raise ConfigError(f"The 'windows' parameter of {func} must hold a measured point with {k} neighbours. "
                           "Got none instead.")
     # A zero spacing is a point with k exact duplicates: it says nothing about the spacing.
-    pooled = np.concatenate(found)
     pooled = pooled[pooled > 0]
     if not len(pooled):
         raise ConfigError(f"The 'windows' parameter of {func} must have distinct neighbours: every measured "

@@ -15,6 +15,8 @@ from hollowtree.primitives.dbscan import (
     dbscan_segments,
     default_eps,
     sparse_points,
+    spacing_quantile,
+    window_distances,
     window_spacing,
 )
 
@@ -246,6 +248,17 @@ def test_window_spacing_of_a_grid() -> None:
     # the mask picks the measured rows; the others still serve as neighbours
     edge = (xyz[:, 0] == 0) & (xyz[:, 1] > 0.5) & (xyz[:, 1] < 2.0)
     assert window_spacing([(xyz, edge)], k=5, quantile=0.5) == pytest.approx(0.1 * np.sqrt(2))
+
+
+def test_window_distances_measured_apart_and_pooled_give_the_window_spacing() -> None:
+    rng = np.random.default_rng(4)
+    windows = [(rng.random((n, 3)) * [3.0, 3.0, 0.1], rng.random(n) < 0.8) for n in (5, 200, 900, 40)]
+    whole = window_spacing(windows, k=8, quantile=0.25)
+    apart = [window_distances(windows[:2], k=8), window_distances(windows[2:], k=8)]
+    assert len(window_distances(windows[:1], k=8)) == 0  # a window of k points or fewer: none
+    assert spacing_quantile(apart, k=8, quantile=0.25) == whole
+    with pytest.raises(ConfigError, match="measured point with 8 neighbours"):
+        spacing_quantile([window_distances(windows[:1], k=8)], k=8)
 
 
 def test_window_spacing_low_quantile_keeps_the_dense_mode() -> None:
