@@ -18,7 +18,6 @@ from hollowtree.pipeline.coarse import FALLBACK_EPS, CoarseParams, run_coarse
 from hollowtree.pipeline.graph import task_runner
 from hollowtree.pipeline.tree_stage import group_starts
 from hollowtree.primitives.dbscan import window_spacing
-from hollowtree.primitives.segment import block_size
 from hollowtree.scenes.synth import synth
 from hollowtree.tiling.ingest import IngestParams, ingest
 from hollowtree.tiling.store import CHUNK_POINTS, RunStore
@@ -91,29 +90,27 @@ def _assert_elements_kept(scan: Path, labels: np.ndarray, reference: np.ndarray)
         assert share >= reference_share - 0.05, inst
 
 
-BLOCKED = CoarseParams(eps=0.3, block_points=16_000)  # blocks of at most 8 000 points (block_size)
+BLOCKED = CoarseParams(eps=0.3, block_points=8_000)
 
 
 @pytest.fixture(scope="module")
 def blocked8k(scan, tmp_path_factory) -> tuple[np.ndarray, Path]:
-    """Segment per point and store of the whole scan in one tile cut into blocks of at
-    most 8 000 points (BLOCKED); shared, read only."""
+    """Segment per point and store of the whole scan in one tile cut into blocks of 8 000
+    points (BLOCKED); shared, read only."""
     store = tmp_path_factory.mktemp("blocked") / "s"
     return _segment(scan, store, 500.0, BLOCKED), store
 
 
-@pytest.mark.parametrize("block_points", [16_000, 20_000])
+@pytest.mark.parametrize("block_points", [8_000, 20_000])
 def test_blocks_inside_a_tile_do_not_change_the_answer(scan, untiled, request, tmp_path, block_points):
-    """A tile above ``block_points`` is segmented block by block (blocks of 8 000 and
-    10 000 points at most) and joined like tiles."""
+    """A tile above ``block_points`` is segmented block by block and joined like tiles."""
     if block_points == BLOCKED.block_points:
         blocked, store = request.getfixturevalue("blocked8k")
     else:
         store = tmp_path / "s"
         blocked = _segment(scan, store, 500.0, CoarseParams(eps=0.3, block_points=block_points))
     recs = RunStore.open(store).records("coarse")
-    assert all(r["n_blocks"] >= -(-r["n_points"] // block_size(block_points)) for r in recs.values()
-               if r["n_points"] > block_points)
+    assert all(r["n_blocks"] >= -(-r["n_points"] // block_points) for r in recs.values())
     assert max(r["n_blocks"] for r in recs.values()) >= 2  # tiles were split
     assert adjusted_rand_score(untiled, blocked) >= 0.95
     _assert_elements_kept(scan, blocked, untiled)
@@ -498,7 +495,7 @@ def test_tile_tables_and_contacts_read_a_piece_at_a_time(scan, tmp_path, monkeyp
 
     monkeypatch.setattr(coarse, "READ_ROWS", 997)
     store_path = tmp_path / "s"
-    params = BLOCKED
+    params = CoarseParams(eps=0.3, block_points=8_000)
     _segment(scan, store_path, 500.0, params)
     s = RunStore.open(store_path)
     scale, offset = (np.asarray(s.attrs["coords"][k]) for k in ("scale", "offset"))
