@@ -40,7 +40,6 @@ from hollowtree.primitives.segment import (
     PRIMITIVE_CODES,
     CoarseParams,
     block_inputs,
-    block_size,
     join_blocks,
     segment_block,
     segment_tile,
@@ -91,7 +90,7 @@ def plan_blocks(url: str, tile: int, cfg: dict[str, Any]) -> int:
     # holds the stored coordinates (12 bytes a row) and about 17 bytes a row more during
     # the split, not a float copy of the tile (the 7.9 M rows of the 100 M-point
     # benchmark's densest tile cost about 40 bytes a row with a float copy).
-    n_blocks, inputs = block_inputs(raw, block_size(params.block_points), _margin(store, cfg, params), scale[:2])
+    n_blocks, inputs = block_inputs(raw, params.block_points, _margin(store, cfg, params), scale[:2])
     n_context = 0
     for b, (rows, mine) in enumerate(inputs):
         store.write_unit(f"coarse/block_input/{tile}/{b}", {"rows": rows, "mine": mine, "xyz": raw[rows]})
@@ -307,9 +306,8 @@ FALLBACK_EPS = 0.3
 # coarse-v4: a free segment wider than STRIP_FACTOR x group_max_plane is large;
 # coarse-v6 (v5 named a trial that was dropped): a block whose context holds more than
 # CONTEXT_FACTOR x block_points is cut again (block_inputs); coarse-v7: a small free
-# cluster that spans free_min_cells cells is a segment; coarse-v8: a cut tile's blocks hold
-# at most half of block_points (block_size).
-COARSE_ALGORITHM = "coarse-v8"
+# cluster that spans free_min_cells cells is a segment.
+COARSE_ALGORITHM = "coarse-v7"
 SPACING_WINDOWS = 1024
 WINDOW_ROWS = 1024
 
@@ -395,13 +393,12 @@ def scan_spacing(store: RunStore, sizes: dict[int, int], *, seed: int = 0, runne
 
 
 def _first_round(sizes: list[int], cap: int) -> list[float]:
-    """The points of the first round's units when tiles above ``cap`` are cut into blocks
-    of at most ``block_size(cap)``: median cuts (``primitives.blocks.split_blocks``) make
-    ``2**k`` blocks of about ``n / 2**k`` points of a tile of ``n``,
-    ``k = ceil(log2(n / block_size(cap)))``."""
+    """The points of the first round's units when tiles above ``cap`` are cut into blocks:
+    median cuts (``primitives.blocks.split_blocks``) make ``2**k`` blocks of about
+    ``n / 2**k`` points of a tile of ``n``, ``k = ceil(log2(n / cap))``."""
     out: list[float] = []
     for n in sizes:
-        k = math.ceil(math.log2(n / block_size(cap))) if n > cap else 0
+        k = math.ceil(math.log2(n / cap)) if n > cap else 0
         out += [n / 2**k] * 2**k
     return out
 
@@ -409,7 +406,7 @@ def _first_round(sizes: list[int], cap: int) -> list[float]:
 def balanced_block_points(sizes: list[int], block_points: int, *, limit: float = UNIT_BALANCE) -> int:
     """The block size of a run (issue 44): ``block_points``, or less where tiles near it
     would stand beside units far smaller, so that the stage's first round (a unit per tile
-    at or below it, one per block of a tile above it) holds no unit above about
+    at or below the block size, one per block above it) holds no unit above about
     ``limit`` times the median unit's points.
 
     From the tiles' points (``sizes``; tiles without points are no work and left out),
@@ -418,7 +415,7 @@ def balanced_block_points(sizes: list[int], block_points: int, *, limit: float =
     the smallest ratio where none is. A scan whose tiles are alike keeps ``block_points``.
 
     >>> balanced_block_points([47_559, 51_595, 118_922, 783_473], 2_200_000)
-    767091
+    366894
     >>> balanced_block_points([900_000, 1_000_000, 1_100_000, 0], 2_200_000)
     2200000
     """

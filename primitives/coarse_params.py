@@ -109,9 +109,8 @@ class CoarseParams(Params, owner="coarse"):
         within ``angle_tol_deg``, positions within ``distance_tol`` metres, radii within
         ``radius_tol`` (relative).
     block_points : int
-        A tile with more points is segmented in x-y blocks of at most half this many
-        points (:func:`~hollowtree.primitives.segment.block_size`; each with a margin of
-        context around it, each a task of its own), joined like
+        A tile with more points is segmented in x-y blocks of at most this many points
+        (each with a margin of context around it, each a task of its own), joined like
         tiles, so that a task's memory follows this bound and not the densest spot of the
         scan (a tile near a scanner station can hold several times the average). 0 =
         never. Default 2.2 M, a little over the ingest's average tile (``tile_points``,
@@ -182,8 +181,8 @@ class CoarseParams(Params, owner="coarse"):
     distance_tol: float = param(0.15, ge=0, workflow=False, doc="same primitive: positions within this, metres")
     radius_tol: float = param(0.15, ge=0, workflow=False, doc="same primitive: radii within this, relative")
     block_points: int = param(
-        2_200_000, ge=0, doc="tiles with more points are segmented in blocks of at most half this many, each a "
-                             "task; 0 = never")
+        2_200_000, ge=0, doc="tiles with more points are segmented in blocks of at most this many, each a task; "
+                             "0 = never")
     block_margin: float | None = param(
         None, gt=0, doc="context around a block, metres; null = min(ingest buffer, 2 x eps)")
     sparse_factor: float = param(

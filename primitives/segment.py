@@ -4,8 +4,7 @@
 runs PCA normals, Efficient RANSAC and DBSCAN on one set of points, and once more at a
 coarser scale on the sparse points the first pass left unsegmented; :func:`segment_tile`
 runs it on a tile, cut into x-y blocks (:func:`block_inputs`, :func:`segment_block`,
-:func:`join_blocks`) of at most :func:`block_size` points when the tile holds more than
-``block_points`` points.
+:func:`join_blocks`) when the tile holds more than ``block_points`` points.
 :func:`same_primitive` tells whether two segments' fits are one primitive (the stitch
 across tiles and blocks). ``pipeline/coarse.py`` runs these per tile as Dask tasks.
 
@@ -183,20 +182,6 @@ def segment_block(xyz: np.ndarray, rows: np.ndarray, mine: np.ndarray, b: int, p
             "fits": fits, "n_invalid": int(no_normal[mine].sum())}
 
 
-def block_size(block_points: int) -> int:
-    """The most points a block of a cut tile holds: half of ``block_points`` (a tile of
-    more than ``block_points`` is cut). A cut tile's blocks run between its plan and its
-    join, a whole tile of up to ``block_points`` runs alone: blocks of half the size keep
-    the cut tile's chain (plan, block, join) within the time of the largest whole tile,
-    so neither stands out on many workers (issue 44; docs/method.md, "Blocks inside a
-    dense tile").
-
-    >>> block_size(2_200_000), block_size(1)
-    (1100000, 1)
-    """
-    return max(1, int(block_points) // 2)
-
-
 #: A block whose context (its own points and those within the margin) holds more than
 #: this many times ``block_points`` is cut again (:func:`block_inputs`): a block task's
 #: memory follows its context. The 10 M- and 100 M-point benchmarks' largest contexts are
@@ -327,7 +312,7 @@ def segment_tile(xyz: np.ndarray, params: CoarseParams, eps: float, tile: int, m
     """Segment a tile whole, or block by block when it holds more than ``block_points``.
 
     A dense tile (near a scanner station it can hold several times the average) is cut
-    into x-y blocks of at most :func:`block_size` points (:func:`primitives.blocks.split_blocks`),
+    into x-y blocks of at most ``block_points`` points (:func:`primitives.blocks.split_blocks`),
     each segmented with its context (:func:`segment_block`) and joined
     (:func:`join_blocks`). :func:`run_coarse` runs the blocks of such a tile as tasks of
     their own (:func:`coarse_block`); this in-process loop gives the same answer. Returns
@@ -339,7 +324,7 @@ def segment_tile(xyz: np.ndarray, params: CoarseParams, eps: float, tile: int, m
         rng = np.random.default_rng(np.random.SeedSequence([params.seed, tile]))
         seg, fits, no_normal = segment_points(xyz, params, eps, rng)
         return seg, fits, int(no_normal.sum()), 1
-    n_blocks, inputs = block_inputs(xyz[:, :2], block_size(cap), margin)
+    n_blocks, inputs = block_inputs(xyz[:, :2], cap, margin)
     results = (segment_block(xyz[rows], rows, mine, b, params, eps, tile) for b, (rows, mine) in enumerate(inputs))
     segment, fits, n_invalid = join_blocks(n, results, params)
     return segment, fits, n_invalid, n_blocks
