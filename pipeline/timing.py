@@ -75,7 +75,7 @@ def unit_priority(stage: str, wave: str, points: int) -> int:
     tile). A block of a cut tile goes by its whole tile's points, not its own: the tile
     ends (its join) only when its last block does, so its blocks go together and before
     smaller whole tiles (on 16 workers the coarse chain of the 100 M-point benchmark
-    predicts 38.5 s by the blocks' own points, 34.6 s by their tile's). The coarse
+    predicts 41.4 s by the blocks' own points, 37.2 s by their tile's). The coarse
     stage gives its Dask tasks these priorities; :func:`predict_seconds` schedules the
     recorded units by them.
 
