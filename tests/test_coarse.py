@@ -235,7 +235,13 @@ def _true_spacing_quantile(store: Path, q: float) -> float:
 def test_automatic_eps_follows_the_scan_spacing_not_the_tiles(scan, tiled20, tmp_path):
     """The automatic eps is EPS_FACTOR x the 25 % spacing quantile measured on windows of
     the scan; it matches the spacing of all points and does not move with the tile size."""
-    from hollowtree.pipeline.coarse import EPS_FACTOR, EPS_QUANTILE, SPACING_STAGE, SPACING_UNITS, scan_spacing
+    from hollowtree.pipeline.coarse import (
+        EPS_FACTOR,
+        EPS_QUANTILE,
+        SPACING_STAGE,
+        SPACING_UNITS,
+        scan_spacing,
+    )
 
     store = tiled20[1]
     s = RunStore.open(store)
@@ -246,7 +252,8 @@ def test_automatic_eps_follows_the_scan_spacing_not_the_tiles(scan, tiled20, tmp
     with task_runner(None, workers=2, progress=False, processes=False) as run:  # windows as Dask tasks: same value
         assert scan_spacing(s, sizes, seed=0, runner=run) == measured
     recs = RunStore.open(store).records(SPACING_STAGE)
-    assert len(recs) == SPACING_UNITS and all("wall_s" in r for r in recs.values())
+    assert len(recs) == SPACING_UNITS
+    assert all("wall_s" in r for r in recs.values())
     one = tmp_path / "one"
     with task_runner("sync", progress=False) as run:
         ingest([str(scan)], str(one), IngestParams(tile_size=500.0, buffer=2.0), runner=run)

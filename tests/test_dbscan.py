@@ -14,8 +14,8 @@ from hollowtree.primitives.dbscan import (
     dbscan_labels,
     dbscan_segments,
     default_eps,
-    sparse_points,
     spacing_quantile,
+    sparse_points,
     window_distances,
     window_spacing,
 )
