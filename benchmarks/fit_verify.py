@@ -12,8 +12,9 @@ procedural store of a seed that is not a training seed is refused.
 
 ``sweep``: on the stores of a validation work folder (element check off), what each
 threshold would do (an instance takes its most probable class when that reaches the
-threshold, else ``other``; ``--reject-only`` never changes a class): found elements and
-precision per threshold, so the threshold is chosen on validation seeds. It ignores
+threshold, else ``other``; ``--reject-only`` never changes a class; ``--vary CLASS``
+sweeps that class's threshold alone, the others keeping the model's): found elements and
+precision per threshold, so the thresholds are chosen on validation seeds. It ignores
 that a rejected arch no longer joins an arcade row, so the chosen threshold is checked
 with a real run.
 
@@ -35,7 +36,7 @@ if str(REPO) not in sys.path:
 import numpy as np  # noqa: E402
 import pyarrow as pa  # noqa: E402
 
-from hollowtree.classes import ELEMENT_CLASSES, ClassId  # noqa: E402
+from hollowtree.classes import ELEMENT_CLASSES, ClassId, class_id  # noqa: E402
 from hollowtree.pipeline.tree_stage import MERGE_MAP, _ground_levels, _merge_map, element_instances  # noqa: E402
 from hollowtree.scenes.procedural import SPLITS  # noqa: E402
 from hollowtree.tiling.readers import PointBlock, read_blocks  # noqa: E402
@@ -154,22 +155,38 @@ def fit(work: list[Path], out: Path, threshold: float) -> int:
     return 0
 
 
-def sweep(work: list[Path], model_path: Path | None, thresholds: list[float], relabel: bool) -> int:
+def sweep(work: list[Path], model_path: Path | None, thresholds: list[float], relabel: bool,
+          vary: list[str] | None = None) -> int:
+    """Found and predicted elements per threshold: every class's (``vary`` empty) or, for
+    each class of ``vary`` in turn, that class's, the others keeping the model's thresholds."""
     check = load_verify_model(model_path)
     rows = [store_rows(s) for s in _stores(work)]
     base = [_found(_matches(r["gc"], r["gi"], r["pc"], r["pi"])) for r in rows]
     f0, p0 = sum(b[0] for b in base), sum(b[1] for b in base)
     print(f"no check: found {f0}, predicted {p0}, precision {100 * f0 / max(p0, 1):.1f}%")
-    print(f"{'threshold':>9} {'found':>6} {'pred':>6} {'precision':>9}  per class found/pred")
+    probs = [check.probabilities(r["features"]) for r in rows]
+    for one in vary or [None]:
+        print(f"{'threshold':>9} {'found':>6} {'pred':>6} {'precision':>9}  per class found/pred"
+              + (f" ({one}'s threshold; the others {check.thresholds().tolist()})" if one else ""))
+        _sweep_rows(rows, probs, check, thresholds, relabel, one)
+    return 0
+
+
+def _sweep_rows(rows: list[dict[str, np.ndarray]], probs: list[np.ndarray], check: ElementCheck,
+                thresholds: list[float], relabel: bool, vary: str | None) -> None:
     for t in thresholds:
+        ts = np.full(len(_ELEMENTS), t)
+        if vary is not None:
+            ts = check.thresholds()
+            ts[int(np.searchsorted(_ELEMENTS, int(class_id(vary))))] = t
         found = pred = 0
         per: dict[int, list[int]] = {int(c): [0, 0] for c in _ELEMENTS}
-        for r in rows:
-            p = check.probabilities(r["features"])
+        for r, p in zip(rows, probs, strict=True):
             best = p.argmax(axis=1) if len(p) else np.zeros(0, dtype=np.int64)
-            new = np.where(p[np.arange(len(p)), best] >= t, _ELEMENTS[best], 0) if len(p) else best
+            new = np.where(p[np.arange(len(p)), best] >= ts[best], _ELEMENTS[best], 0) if len(p) else best
             if not relabel and len(p):
-                new = np.where(p[np.arange(len(p)), np.searchsorted(_ELEMENTS, r["cls"])] >= t, r["cls"], 0)
+                own = np.searchsorted(_ELEMENTS, r["cls"])
+                new = np.where(p[np.arange(len(p)), own] >= ts[own], r["cls"], 0)
             pc, pi = r["pc"].copy(), r["pi"].copy()
             pkey = pi * 256 + pc
             for k, c in zip(r["key"].tolist(), new.tolist(), strict=True):
@@ -189,7 +206,6 @@ def sweep(work: list[Path], model_path: Path | None, thresholds: list[float], re
                 per[c][1] += b
         print(f"{t:>9.2f} {found:>6} {pred:>6} {100 * found / max(pred, 1):>8.1f}%  "
               + " ".join(f"{ClassId(c).label}:{a}/{b}" for c, (a, b) in per.items()), flush=True)
-    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -204,10 +220,12 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument("--model", type=Path, default=None)
     s.add_argument("--thresholds", type=float, nargs="+", default=[0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
     s.add_argument("--reject-only", action="store_true", help="never change an instance's class, only reject it")
+    s.add_argument("--vary", nargs="+", default=[], metavar="CLASS",
+                   help="sweep only this class's threshold (each in turn), the others keeping the model's")
     a = ap.parse_args(argv)
     if a.cmd == "fit":
         return fit(a.work, a.out, a.threshold)
-    return sweep(a.work, a.model, a.thresholds, not a.reject_only)
+    return sweep(a.work, a.model, a.thresholds, not a.reject_only, a.vary)
 
 
 if __name__ == "__main__":

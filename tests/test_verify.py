@@ -74,6 +74,30 @@ def test_decision_takes_the_most_probable_class_or_other() -> None:
     assert check.decide(np.zeros((0, len(VERIFY_FEATURES)))).tolist() == []
 
 
+def test_a_class_threshold_applies_to_instances_of_that_class_only(tmp_path) -> None:
+    """``class_thresholds``: the most probable class must reach its own threshold; the other
+    classes keep ``threshold``. The file keeps them, and names no class that is no element."""
+    no = VerifyModel(init=-4.0, learning_rate=0.1, trees=(LEAF,))
+    check = ElementCheck({4: no, 5: no, 6: _stump("log10_height", 1.0, -3.0, 1.0),
+                          7: _stump("log10_height", 1.0, 2.0, -3.0)}, threshold=0.8, class_thresholds={6: 0.7})
+    f = np.zeros((2, len(VERIFY_FEATURES)))
+    f[1, VERIFY_FEATURES.index("log10_height")] = 1.5
+    assert check.thresholds().tolist() == [0.8, 0.8, 0.7, 0.8]
+    assert check.decide(f).tolist() == [int(ClassId.PILLAR), int(ClassId.MINARET)]
+    strict = ElementCheck(check.models, threshold=0.8, class_thresholds={7: 0.9})
+    assert strict.decide(f).tolist() == [int(ClassId.OTHER), int(ClassId.OTHER)]
+    path = tmp_path / "check.json"
+    check.save(path)
+    again = load_verify_model(path)
+    assert again.class_thresholds == {6: 0.7}
+    assert np.array_equal(again.decide(f), check.decide(f))
+    d = check.to_dict()
+    d["class_thresholds"] = {"wall": 0.5}
+    (tmp_path / "wall.json").write_text(json.dumps(d))
+    with pytest.raises(ValueError, match="not an element class"):
+        load_verify_model(tmp_path / "wall.json")
+
+
 def test_a_check_survives_its_file(tmp_path) -> None:
     check = ElementCheck({c: _stump("score", 0.5, -1.0, 1.0) for c in (4, 5, 6, 7)}, threshold=0.6,
                          info={"sites": [1, 2]})

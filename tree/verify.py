@@ -134,11 +134,17 @@ def instance_features(
 @dataclass(frozen=True, eq=False)
 class ElementCheck:
     """One :class:`VerifyModel` per element class (P(an element of that class)) and the
-    threshold the most probable class must reach."""
+    threshold the most probable class must reach: ``class_thresholds`` of that class where
+    it names one, else ``threshold``."""
 
     models: dict[int, VerifyModel]
     threshold: float = 0.5
     info: dict[str, Any] = field(default_factory=dict)
+    class_thresholds: dict[int, float] = field(default_factory=dict)
+
+    def thresholds(self) -> FloatArray:
+        """The threshold of each :data:`_ELEMENTS` class, in order."""
+        return np.asarray([self.class_thresholds.get(c, self.threshold) for c in _ELEMENTS], dtype=np.float64)
 
     def probabilities(self, features: npt.ArrayLike) -> FloatArray:
         """P(element of class) per row of ``features``, one column per :data:`_ELEMENTS` class."""
@@ -156,23 +162,30 @@ class ElementCheck:
         >>> check = ElementCheck({4: no, 5: yes, 6: no, 7: no})
         >>> check.decide(np.zeros((1, len(VERIFY_FEATURES)))).tolist()
         [5]
+        >>> ElementCheck(check.models, class_thresholds={5: 0.99}).decide(np.zeros((1, len(VERIFY_FEATURES)))).tolist()
+        [8]
         """
         p = self.probabilities(features)
         best = p.argmax(axis=1) if len(p) else np.zeros(0, dtype=np.int64)
-        ok = p[np.arange(len(p)), best] >= self.threshold
+        ok = p[np.arange(len(p)), best] >= self.thresholds()[best]
         return np.where(ok, np.asarray(_ELEMENTS)[best], int(ClassId.OTHER)).astype(np.int64)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"version": 1, "threshold": self.threshold, "info": self.info,
-                "models": {ClassId(c).label: m.to_dict() for c, m in self.models.items()}}
+        d = {"version": 1, "threshold": self.threshold, "info": self.info,
+             "models": {ClassId(c).label: m.to_dict() for c, m in self.models.items()}}
+        if self.class_thresholds:
+            d["class_thresholds"] = {ClassId(c).label: t for c, t in self.class_thresholds.items()}
+        return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> ElementCheck:
-        unknown = set(d) - {"version", "threshold", "info", "models"}
+        unknown = set(d) - {"version", "threshold", "info", "models", "class_thresholds"}
         if unknown:
             raise ValueError(f"unknown keys in an element check: {sorted(unknown)}")
         models = {int(class_id(k)): VerifyModel.from_dict(v) for k, v in d["models"].items()}
-        return cls(models=models, threshold=float(d.get("threshold", 0.5)), info=dict(d.get("info", {})))
+        per = {int(class_id(k)): float(v) for k, v in d.get("class_thresholds", {}).items()}
+        return cls(models=models, threshold=float(d.get("threshold", 0.5)), info=dict(d.get("info", {})),
+                   class_thresholds=per)
 
     def save(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.to_dict(), separators=(",", ":")) + "\n")
@@ -190,6 +203,8 @@ def _load(path: str) -> ElementCheck:
     except (OSError, ValueError, KeyError, TypeError) as e:
         reason = e.strerror if isinstance(e, OSError) and e.strerror else e
         raise ConfigError(f"{path} is not a readable element check: {reason}") from None
-    if not math.isfinite(check.threshold):
+    if not all(math.isfinite(t) for t in (check.threshold, *check.class_thresholds.values())):
         raise ConfigError(f"{path}: the element check's threshold is not a number")
+    if set(check.class_thresholds) - set(_ELEMENTS):
+        raise ConfigError(f"{path}: class_thresholds names a class that is not an element class")
     return check
