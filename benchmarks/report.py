@@ -32,7 +32,7 @@ RESULTS = REPO / "benchmarks" / "results"
 #: The latest run of each kind of element-recall result (``bench_generalize.py --json``).
 #: These are the figures of docs/generalize.md; edit the file names when a newer run replaces one.
 LATEST = {
-    "test": "generalize-test-tree-v25.json",
+    "test": "generalize-test-tree-v26.json",
     "test-5m": "generalize-test-5m-tree-v25.json",
     "val-4m": "generalize-val-4m-tree-v26.json",
     "val-1m": "generalize-val-density-1m-tree-v25.json",
