@@ -11,7 +11,6 @@ non-finite coordinate, or all points at one spot (zero extent) gets the explicit
 
 from __future__ import annotations
 
-import os
 import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -27,6 +26,7 @@ from hollowtree.columns import column_span
 from hollowtree.errors import ConfigError
 from hollowtree.hollownet.model import DEFAULT_WEIGHTS, OUTPUT_CLASSES, load_model
 from hollowtree.hollownet.voxels import GRID_SIZE, voxelize_batch
+from hollowtree.threads import task_threads
 
 __all__ = ["Classifier", "Prediction", "default_threads"]
 
@@ -36,19 +36,9 @@ _LOCK = threading.Lock()
 
 
 def default_threads() -> int:
-    """Torch threads for inference: ``OMP_NUM_THREADS`` if set, else min(4, CPUs of this process).
-
-    A Dask worker process with several worker threads should set ``OMP_NUM_THREADS=1``
-    (or pass ``num_threads=1``) so that the threads do not oversubscribe the cores.
-    """
-    env = os.environ.get("OMP_NUM_THREADS", "")
-    if env.isdigit() and int(env) > 0:
-        return int(env)
-    try:
-        n = len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        n = os.cpu_count() or 1
-    return max(1, min(4, n))
+    """Torch threads for inference: ``OMP_NUM_THREADS`` if set (1 in a Dask worker), else
+    min(4, CPUs of this process) (:func:`hollowtree.threads.task_threads`)."""
+    return task_threads(cap=4)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)

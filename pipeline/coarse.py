@@ -7,6 +7,7 @@ and after all tiles joins the tiles' segments across their shared buffer points.
 
 Store layout written here (``docs/store.md``)::
 
+    coarse/normals/<tile>/<unit>/<part>          a big unit's normals, in parts (deleted with the unit's results)
     coarse/tiles/<tile>/primitive   uint8 (n,)   0 none, 1 plane, 2 sphere, 3 cylinder, 4 cone, 5 torus
     coarse/tiles/<tile>/segment     int32 (n,)   tile-local segment, 0 = unsegmented
     coarse/tiles/<tile>/global      uint64 (n,)  global segment of core rows (0 elsewhere)
@@ -35,6 +36,7 @@ from hollowtree.primitives.dbscan import spacing_quantile, window_distances
 from hollowtree.primitives.group import (
     segment_contacts_chunked,
 )
+from hollowtree.primitives.normals import estimate_normals
 from hollowtree.primitives.score import load_kernels
 from hollowtree.primitives.segment import (
     PRIMITIVE_CODES,
@@ -56,15 +58,30 @@ STAGE = "coarse"
 BLOCK_STAGE = "coarse.blocks"
 #: Records of the tiles cut into blocks (:func:`plan_blocks`; unit ``"<tile>"``).
 PLAN_STAGE = "coarse.plan"
+#: Records of the normals tasks (:func:`coarse_normals`; unit ``"<tile>.<block>.<part>"``,
+#: block ``w`` for a tile segmented whole).
+NORMAL_STAGE = "coarse.normals"
+#: Normals tasks per ``block_points`` points of a unit (a block, or a tile segmented
+#: whole): a unit's normals are about a third of its time, and in parts of their own they
+#: no longer sit on the longest chain of tasks (plan, block, join). A unit of at most
+#: ``block_points / NORMAL_PARTS`` points computes its normals itself.
+NORMAL_PARTS = 2
 
 
-def _tile_points(store: RunStore, tile: int, scale: np.ndarray) -> dict[str, np.ndarray]:
-    d = store.read_unit(f"tiles/{tile}", ["xyz", "core", "index"])
-    # Store-local metres: consistent across tiles, so primitive parameters compare.
-    d["local"] = d["xyz"].astype(np.float64) * scale
-    return d
+def normal_parts(points: int, cap: int) -> int:
+    """Normals tasks of a unit of ``points`` points when blocks hold at most ``cap`` (1:
+    the unit computes them itself).
+
+    >>> normal_parts(2_000_000, 2_000_000), normal_parts(2_100_000, 2_000_000), normal_parts(900_000, 2_000_000)
+    (2, 3, 1)
+    >>> normal_parts(5_000_000, 0)  # no blocks
+    1
+    """
+    return max(1, math.ceil(NORMAL_PARTS * points / cap)) if cap > 0 else 1
 
 
+def _unit_name(tile: int, b: int) -> str:
+    return f"{tile}.{b if b >= 0 else 'w'}"
 
 
 def _margin(store: RunStore, cfg: dict[str, Any], params: CoarseParams) -> float:
@@ -76,40 +93,85 @@ def _block_results_path(tile: int, b: int) -> tuple[str, str]:
     return f"coarse/blocks/{tile}/{b}", f"coarse/block_fits/{tile}/{b}.parquet"
 
 
-def plan_blocks(url: str, tile: int, cfg: dict[str, Any]) -> int:
+def plan_blocks(url: str, tile: int, cfg: dict[str, Any]) -> list[int]:
     """Dask task: cut a tile above ``block_points`` into blocks, once. Writes each block's
     input (``coarse/block_input/<tile>/<b>``: the tile rows of its context, which of them
-    it owns and their stored coordinates), then its record; returns the number of blocks.
-    A block task then reads only its own context, not the whole tile."""
+    it owns and their stored coordinates), then its record; returns the points of each
+    block's context. A block task then reads only its own context, not the whole tile."""
     store = RunStore.open(url, mode="a")
     params = CoarseParams.from_dict(cfg["params"])
     raw = store.read_unit(f"tiles/{tile}", ["xyz"])["xyz"]
     scale = np.asarray(store.attrs["coords"]["scale"], dtype=np.float64)
     # Split on the stored integers with their scale (the blocks of the tile's metres,
-    # _tile_points, to the bit) and write each block's input as it is made: the task
+    # _unit_xyz, to the bit) and write each block's input as it is made: the task
     # holds the stored coordinates (12 bytes a row) and about 17 bytes a row more during
     # the split, not a float copy of the tile (the 7.9 M rows of the 100 M-point
     # benchmark's densest tile cost about 40 bytes a row with a float copy).
     n_blocks, inputs = block_inputs(raw, params.block_points, _margin(store, cfg, params), scale[:2])
-    n_context = 0
+    contexts = []
     for b, (rows, mine) in enumerate(inputs):
         store.write_unit(f"coarse/block_input/{tile}/{b}", {"rows": rows, "mine": mine, "xyz": raw[rows]})
-        n_context += len(rows)
+        contexts.append(len(rows))
     store.record(PLAN_STAGE, str(tile), {"params_hash": cfg["params_hash"], "n_blocks": n_blocks,
-                                         "n_context": n_context})
-    return n_blocks
+                                         "n_context": sum(contexts), "contexts": contexts})
+    return contexts
 
 
-def coarse_block(url: str, tile: int, b: int, cfg: dict[str, Any]) -> dict[str, Any]:
-    """Dask task: segment block ``b`` of a tile above ``block_points`` from its input
-    (:func:`plan_blocks`); write what the tile's join needs (``coarse/blocks/<tile>/<b>``,
-    ``coarse/block_fits/<tile>/<b>.parquet``), then its record."""
+def _unit_xyz(store: RunStore, tile: int, b: int) -> np.ndarray:
+    """The points a unit segments (store-local metres): block ``b``'s context, or (``b``
+    < 0) the whole tile; the same conversion everywhere (the stored integers times the scale), so the
+    normals tasks and the unit see the same points to the bit."""
+    scale = np.asarray(store.attrs["coords"]["scale"], dtype=np.float64)
+    group = f"coarse/block_input/{tile}/{b}" if b >= 0 else f"tiles/{tile}"
+    return store.read_unit(group, ["xyz"])["xyz"].astype(np.float64) * scale
+
+
+def coarse_normals(url: str, tile: int, b: int, part: int, n_parts: int, cfg: dict[str, Any]) -> dict[str, Any]:
+    """Dask task: the normals of part ``part`` of ``n_parts`` of a unit's points (block
+    ``b`` of a tile, or the whole tile for ``b`` < 0; ``estimate_normals(part=...)``: the
+    whole unit's k-d tree, so exactly the normals the unit would compute); writes the rows
+    that have one and their normals (``coarse/normals/<tile>/<unit>/<part>``), then its
+    record."""
     store = RunStore.open(url, mode="a")
     params = CoarseParams.from_dict(cfg["params"])
-    scale = np.asarray(store.attrs["coords"]["scale"])
-    d = store.read_unit(f"coarse/block_input/{tile}/{b}")
-    # The same conversion as the tile's (_tile_points): the same metres, the same answer.
-    r = segment_block(d["xyz"].astype(np.float64) * scale, d["rows"], d["mine"], b, params, cfg["eps"], tile)
+    xyz = _unit_xyz(store, tile, b)
+    n = len(xyz)
+    nr = estimate_normals(xyz, k=params.k, part=(part, n_parts))
+    rows = np.flatnonzero(nr.valid)
+    store.write_unit(f"coarse/normals/{tile}/{_unit_name(tile, b)}/{part}",
+                     {"rows": rows, "normals": nr.normals[rows]})
+    info = {"params_hash": cfg["params_hash"], "n_points": n * (part + 1) // n_parts - n * part // n_parts,
+            "n_context": n}
+    store.record(NORMAL_STAGE, f"{_unit_name(tile, b)}.{part}", info)
+    return info
+
+
+def _unit_normals(store: RunStore, tile: int, b: int, n: int, n_parts: int
+                  ) -> tuple[np.ndarray, np.ndarray] | None:
+    """A unit's normals and which points have one, from its normals tasks
+    (:func:`coarse_normals`); None where it computes them itself (``n_parts`` < 2)."""
+    if n_parts < 2:
+        return None
+    normals = np.zeros((n, 3))
+    valid = np.zeros(n, dtype=bool)
+    for part in range(n_parts):
+        d = store.read_unit(f"coarse/normals/{tile}/{_unit_name(tile, b)}/{part}")
+        normals[d["rows"]] = d["normals"]
+        valid[d["rows"]] = True
+    return normals, valid
+
+
+def coarse_block(url: str, tile: int, b: int, cfg: dict[str, Any], n_parts: int = 1) -> dict[str, Any]:
+    """Dask task: segment block ``b`` of a tile above ``block_points`` from its input
+    (:func:`plan_blocks`) and, with ``n_parts`` > 1, its normals tasks' results; write what
+    the tile's join needs (``coarse/blocks/<tile>/<b>``, ``coarse/block_fits/<tile>/<b>.parquet``),
+    then its record."""
+    store = RunStore.open(url, mode="a")
+    params = CoarseParams.from_dict(cfg["params"])
+    d = store.read_unit(f"coarse/block_input/{tile}/{b}", ["rows", "mine"])
+    xyz = _unit_xyz(store, tile, b)  # the same conversion as the tile's: the same metres, the same answer
+    r = segment_block(xyz, d["rows"], d["mine"], b, params, cfg["eps"], tile,
+                      normals=_unit_normals(store, tile, b, len(xyz), n_parts))
     arrays, table = _block_results_path(tile, b)
     store.write_unit(arrays, {"own_rows": r["own_rows"].astype(np.int64), "own_seg": r["own_seg"].astype(np.int32),
                               "other_rows": r["other_rows"].astype(np.int64),
@@ -124,9 +186,10 @@ def coarse_block(url: str, tile: int, b: int, cfg: dict[str, Any]) -> dict[str, 
     return info
 
 
-def _coarse_unit(url: str, tile: int, b: int, cfg: dict[str, Any]) -> dict[str, Any]:
-    """Dask task of the stage's first round: block ``b`` of a tile, or (``b`` < 0) a whole tile."""
-    return coarse_tile(url, tile, cfg) if b < 0 else coarse_block(url, tile, b, cfg)
+def _coarse_unit(url: str, tile: int, b: int, cfg: dict[str, Any], n_parts: int = 1) -> dict[str, Any]:
+    """Dask task of the stage's first round: block ``b`` of a tile, or (``b`` < 0) a whole
+    tile; ``n_parts`` normals tasks ran before it (1: none)."""
+    return coarse_tile(url, tile, cfg, n_parts=n_parts) if b < 0 else coarse_block(url, tile, b, cfg, n_parts)
 
 
 def _block_results(store: RunStore, tile: int, n_blocks: int) -> Iterator[dict[str, Any]]:
@@ -180,7 +243,7 @@ def _tile_summary(store: RunStore, tile: int, segment: np.ndarray, n_segments: i
                 col = raw[:, j].astype(np.int64)
                 np.minimum.at(lo[:, j], seg, col)
                 np.maximum.at(hi[:, j], seg, col)
-            # The same metres as the segmentation's (_tile_points), so the same contacts.
+            # The same metres as the segmentation's (_unit_xyz), so the same contacts.
             yield raw.astype(np.float64) * scale, seg
 
     contacts = None
@@ -200,9 +263,10 @@ def _tile_summary(store: RunStore, tile: int, segment: np.ndarray, n_segments: i
     return table, contacts
 
 
-def coarse_tile(url: str, tile: int, cfg: dict[str, Any], n_blocks: int = 0) -> dict[str, int]:
-    """Dask task: segment one tile (or, with ``n_blocks``, join the results of its block
-    tasks, :func:`coarse_block`); write its arrays and table, then its record.
+def coarse_tile(url: str, tile: int, cfg: dict[str, Any], n_blocks: int = 0, n_parts: int = 1) -> dict[str, int]:
+    """Dask task: segment one tile (with ``n_parts`` > 1, from its normals tasks' results),
+    or, with ``n_blocks``, join the results of its block tasks (:func:`coarse_block`);
+    write its arrays and table, then its record.
 
     A join holds a few bytes per point of the tile and one block's results at a time
     (:func:`join_blocks`, :func:`_tile_summary`), never the tile's coordinates: a tile
@@ -216,8 +280,9 @@ def coarse_tile(url: str, tile: int, cfg: dict[str, Any], n_blocks: int = 0) -> 
     if from_tasks:
         segment, fits, n_invalid = join_blocks(n, _block_results(store, tile, n_blocks), params)
     else:
-        xyz = _tile_points(store, tile, scale)["local"]
-        segment, fits, n_invalid, n_blocks = segment_tile(xyz, params, cfg["eps"], tile, _margin(store, cfg, params))
+        xyz = _unit_xyz(store, tile, -1)
+        segment, fits, n_invalid, n_blocks = segment_tile(xyz, params, cfg["eps"], tile, _margin(store, cfg, params),
+                                                          normals=_unit_normals(store, tile, -1, len(xyz), n_parts))
         del xyz
     segment = segment.astype(np.int32, copy=False)
     kinds = np.array([0] + [PRIMITIVE_CODES.get(f["kind"], 0) for f in fits], dtype=np.uint8)  # free: 0
@@ -247,9 +312,10 @@ def coarse_tile(url: str, tile: int, cfg: dict[str, Any], n_blocks: int = 0) -> 
         "n_contacts": n_contacts,
     }
     store.record(STAGE, str(tile), info)
-    if from_tasks:  # the blocks' inputs and results are in the tile's arrays now
-        for group in ("blocks", "block_input", "block_of"):  # block_of: older stores
-            store.delete(f"coarse/{group}/{tile}")
+    # The blocks' inputs and results and the units' normals are in the tile's arrays now.
+    for group in ("blocks", "block_input", "block_of", "normals"):  # block_of: older stores
+        store.delete(f"coarse/{group}/{tile}")
+    if from_tasks:
         store.delete_files(f"coarse/block_fits/{tile}")
     return info
 
@@ -467,7 +533,7 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     cfg = {"params": params.to_dict(), "eps": float(eps), "algorithm": COARSE_ALGORITHM}
     h = params_hash([cfg, attrs["ingest"]["params_hash"]])
     cfg["params_hash"] = h
-    stage = Stage(store, STAGE, h, unit_stages=(BLOCK_STAGE, PLAN_STAGE, *STITCH_STAGES))
+    stage = Stage(store, STAGE, h, unit_stages=(BLOCK_STAGE, PLAN_STAGE, NORMAL_STAGE, *STITCH_STAGES))
     previous = stage.last
     stage.clear_if_changed()  # other parameters: every tile is redone
     done = set(stage.done())
@@ -478,44 +544,70 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     # start when its plan ends and its join when its blocks do, beside the other tiles'
     # tasks, never waiting for a whole wave (pipeline.timing.PIPELINED). Each task runs
     # in a child process of its worker (in_child): a worker's heap would keep what its
-    # earlier tasks left, and a later task peak 80-140 MB above the first.
+    # earlier tasks left, and a later task peak 80-140 MB above the first. Per tile:
+    # [plan] -> normals parts -> units (its blocks, or the whole tile) -> [join].
     size = {t: int(done_ingest[str(t)].get("n_points", 0)) for t in todo}
     big = [t for t in todo if params.block_points and size[t] > params.block_points]
-    planned = {k: int(v["n_blocks"]) for k, v in stage.done(PLAN_STAGE).items()}
-    n_blocks = {t: planned[str(t)] for t in big if str(t) in planned}
+    contexts: dict[int, list[int]] = {}  # a cut tile's blocks' context points
+    for k, v in stage.done(PLAN_STAGE).items():
+        if int(k) in size:
+            contexts[int(k)] = [int(c) for c in v["contexts"]] if "contexts" in v else [
+                store.array_length(f"coarse/block_input/{k}/{b}/rows") for b in range(int(v["n_blocks"]))]
     blocks_done = set(stage.done(BLOCK_STAGE))
+    normals_done = set(stage.done(NORMAL_STAGE))
+    # Units of many points compute their normals in tasks of their own first (NORMAL_PARTS),
+    # where tasks run side by side; in one process that would only repeat the k-d trees.
+    split = not getattr(runner, "serial", False)
     plan_fn, unit_fn, join_fn = in_child(plan_blocks), in_child(_coarse_unit, load_kernels), in_child(coarse_tile)
-    left: dict[int, int] = {}  # a big tile's blocks not ended yet
+    normals_fn = in_child(coarse_normals)
+    left: dict[int, int] = {}  # tasks of a tile's current step not ended yet
 
-    def unit(t: int, b: int) -> Task:
-        # A block goes by its tile's points, like a whole tile: the tile ends (its join)
-        # only when its last block does (pipeline.timing.unit_priority).
-        return Task(unit_fn, (url, t, b, cfg), unit_priority(STAGE, "tiles", size[t]), ("unit", t, b), "coarse: tiles")
+    def parts(t: int, b: int) -> int:
+        return normal_parts(contexts[t][b] if b >= 0 else size[t], params.block_points) if split else 1
 
-    def blocks(t: int) -> list[Task]:
-        todo_b = [b for b in range(n_blocks[t]) if f"{t}.{b}" not in blocks_done]
-        left[t] = len(todo_b)
-        return [unit(t, b) for b in todo_b] or [
-            Task(join_fn, (url, t, cfg, n_blocks[t]), unit_priority(STAGE, "joins", size[t]), ("join", t), "coarse: joins")]
+    def units(t: int) -> list[int]:  # a tile's units not recorded: its blocks, or the tile (-1)
+        return [b for b in range(len(contexts[t])) if f"{t}.{b}" not in blocks_done] if t in contexts else [-1]
+
+    def normals(t: int) -> list[Task]:
+        """A tile's normals tasks not recorded, or (none) its next step."""
+        tasks = [Task(normals_fn, (url, t, b, i, parts(t, b), cfg), unit_priority(STAGE, "normals", size[t]),
+                      ("normals", t), "coarse: normals")
+                 for b in units(t) for i in range(parts(t, b) if parts(t, b) > 1 else 0)
+                 if f"{_unit_name(t, b)}.{i}" not in normals_done]
+        left[t] = len(tasks)
+        return tasks or segment(t)
+
+    def segment(t: int) -> list[Task]:
+        """A tile's units not recorded (they go by their tile's points: the tile ends only
+        when its last block does, pipeline.timing.unit_priority), or (none) its join."""
+        todo_u = units(t)
+        left[t] = len(todo_u)
+        return [Task(unit_fn, (url, t, b, cfg, parts(t, b)), unit_priority(STAGE, "tiles", size[t]),
+                     ("unit", t, b), "coarse: tiles") for b in todo_u] or [
+            Task(join_fn, (url, t, cfg, len(contexts[t])), unit_priority(STAGE, "joins", size[t]), ("join", t),
+                 "coarse: joins")]
 
     def then(tag: tuple[Any, ...], result: Any) -> list[Task]:
         kind, t = tag[0], tag[1]
         if kind == "plan":
-            n_blocks[t] = int(result)
-            return blocks(t)
-        if kind == "unit" and tag[2] >= 0:
+            contexts[t] = [int(c) for c in result]
+            return normals(t)
+        if kind in ("normals", "unit"):
             left[t] -= 1
-            if not left[t]:
-                blocks_done.update(f"{t}.{b}" for b in range(n_blocks[t]))
-                return blocks(t)  # all recorded: the join
+            if left[t]:
+                return []
+            if kind == "normals":
+                return segment(t)
+            if t in contexts:  # a cut tile's blocks are all recorded: its join
+                blocks_done.update(f"{t}.{b}" for b in range(len(contexts[t])))
+                return segment(t)
         return []
 
     first = [Task(plan_fn, (url, t, cfg), unit_priority(STAGE, "plan", size[t]), ("plan", t), "coarse: blocks")
-             for t in big if t not in n_blocks]
-    first += [unit(t, -1) for t in todo if t not in big]
-    for t in big:
-        if t in n_blocks:
-            first += blocks(t)
+             for t in big if t not in contexts]
+    for t in todo:
+        if t not in big or t in contexts:
+            first += normals(t)
     run_graph(runner, first, then, "coarse: tiles")
     t_stitch = time.perf_counter()
     if not todo and previous.get("params_hash") == h and "n_tile_segments" in previous:

@@ -503,7 +503,9 @@ def _sync_runner(progress: bool) -> Runner:
                 t = ready.pop()
                 ready.ended(then(t.tag, t.fn(*t.args)))
 
-    return _timed(run, graph)
+    runner = _timed(run, graph)
+    runner.serial = True  # type: ignore[attr-defined]  # one task at a time: nothing runs beside another
+    return runner
 
 
 def _client_runner(client_of: Callable[[], Any], progress: bool) -> Runner:

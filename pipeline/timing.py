@@ -43,6 +43,7 @@ WAVES = (
     ("ingest", "copies", "ingest.copies"),
     ("coarse", "spacing", "coarse.spacing"),
     ("coarse", "plan", "coarse.plan"),
+    ("coarse", "normals", "coarse.normals"),
     ("coarse", "tiles", "coarse.blocks"),
     ("coarse", "tiles", "coarse"),
     ("coarse", "joins", "coarse"),
@@ -55,17 +56,21 @@ WAVES = (
     ("labels", "ranges", "labels"),
 )
 
-#: ``(stage, wave) -> the wave it follows``, unit by unit: each unit of the wave starts
-#: once the units of the same tile (the record's unit name up to its first ``.``) in the
-#: wave it follows have ended, not once that whole wave has. The coarse stage submits
-#: them so (:func:`pipeline.coarse.run_coarse`): a big tile's blocks as soon as its plan
-#: ends, its join as soon as its blocks do; a tile segmented whole waits for nothing.
-PIPELINED = {("coarse", "tiles"): ("coarse", "plan"), ("coarse", "joins"): ("coarse", "tiles")}
+#: ``(stage, wave) -> the waves it may follow`` (the first of them a run recorded), unit
+#: by unit: each unit of the wave starts once the units of the same tile (the record's
+#: unit name up to its first ``.``) in the wave it follows have ended, not once that whole
+#: wave has. The coarse stage submits them so (:func:`pipeline.coarse.run_coarse`): a big
+#: tile's normals as soon as its plan ends, its blocks as soon as its normals do (or its
+#: plan, without normals tasks), its join as soon as its blocks do; a tile segmented whole
+#: waits for its normals or for nothing.
+PIPELINED = {("coarse", "normals"): (("coarse", "plan"),),
+             ("coarse", "tiles"): (("coarse", "normals"), ("coarse", "plan")),
+             ("coarse", "joins"): (("coarse", "tiles"),)}
 
 #: Waves whose units go before any other unit that is ready at the same time: a plan
-#: unlocks its tile's blocks, the longest units of the stage; a join ends its tile and
-#: frees its blocks' inputs.
-FIRST = frozenset({("coarse", "plan"), ("coarse", "joins")})
+#: unlocks its tile's normals and blocks, normals their tile's units, the longest of the
+#: stage; a join ends its tile and frees its blocks' inputs.
+FIRST = frozenset({("coarse", "plan"), ("coarse", "normals"), ("coarse", "joins")})
 
 
 def unit_priority(stage: str, wave: str, points: int) -> int:
@@ -266,8 +271,8 @@ def predict_seconds(wave_list: Sequence[Wave], driver_s: Mapping[str, float], wo
     total = repeat * sum(driver_s.values())
     chains: list[list[Wave]] = []
     for w in wave_list:
-        follows = PIPELINED.get((w.stage, w.name))
-        if chains and follows is not None and (chains[-1][-1].stage, chains[-1][-1].name) == follows and w.tiles:
+        follows = PIPELINED.get((w.stage, w.name), ())
+        if chains and (chains[-1][-1].stage, chains[-1][-1].name) in follows and w.tiles:
             chains[-1].append(w)
         else:
             chains.append([w])

@@ -43,6 +43,7 @@ from hollowtree.errors import ConfigError, PipelineError
 from hollowtree.pipeline.graph import in_child
 from hollowtree.pipeline.timing import UNIT_BALANCE
 from hollowtree.pipeline.tree_params import DEVICES, TreeStageParams
+from hollowtree.threads import task_threads
 from hollowtree.tiling.stage import Stage, params_hash
 from hollowtree.tiling.store import CHUNK_POINTS, RunStore
 from hollowtree.tree.tall import short_minarets, size_rules, slender_domes
@@ -274,7 +275,7 @@ def spread_labels(url: str, b: int, j: int, rows: tuple[int, int], csr: tuple[in
     for a in range(rows[0], rows[1], step):
         z = min(a + step, rows[1])
         pts = store.read_slice("coarse/csr/xyz", csr[0] + a, csr[0] + z).astype(np.float64) * np.asarray(scale)
-        _, near = kd.query(pts, workers=-1)
+        _, near = kd.query(pts, workers=task_threads())
         for k, v in sampled.items():
             store.write_slice(f"tree/batches/{b}/{k}", a, v[near])
         counts += np.bincount(sampled["leaf"][near].astype(np.int64), minlength=len(counts))

@@ -26,6 +26,7 @@ from hollowtree.errors import ConfigError
 from hollowtree.params import check_args
 from hollowtree.primitives._validation import as_xyz as _as_xyz
 from hollowtree.primitives.coarse_params import NORMALS_ARGS, CoarseParams
+from hollowtree.threads import task_threads
 
 __all__ = ["NormalResult", "estimate_normals"]
 
@@ -84,6 +85,7 @@ def estimate_normals(
     viewpoints: npt.ArrayLike | None = None,
     viewpoint_index: npt.ArrayLike | None = None,
     core_mask: npt.ArrayLike | None = None,
+    part: tuple[int, int] | None = None,
 ) -> NormalResult:
     """Estimate oriented unit normals and surface variation by local PCA.
 
@@ -103,6 +105,12 @@ def estimate_normals(
     core_mask : ndarray of shape (n_points,) of bool or None
         If given, normals are computed only for the True rows; the other rows (a tile's
         buffer) still serve as neighbours and come back with ``valid=False``.
+    part : (i, n) or None
+        If given, normals are computed only for the ``i``-th of ``n`` equal parts of the
+        points (of ``core_mask``'s rows, if given) taken in the k-d tree's order, which
+        keeps each part compact in space; the other rows come back with ``valid=False``.
+        Each part's rows get exactly the normals a whole call gives them (the same tree,
+        the same neighbours), so ``n`` tasks can share one set of points' normals.
 
     Returns
     -------
@@ -140,6 +148,10 @@ def estimate_normals(
     >>> res = estimate_normals(xyz, k=4, viewpoints=[[0., 0, 5]], viewpoint_index=[0] * 6)
     >>> res.normals[0].round(6).tolist(), float(res.curvature[0].round(6)), bool(res.valid.all())
     ([0.0, 0.0, 1.0], 0.0, True)
+    >>> halves = [estimate_normals(xyz, k=4, part=(i, 2)) for i in range(2)]
+    >>> whole = estimate_normals(xyz, k=4)
+    >>> bool(np.array_equal(np.where(halves[0].valid[:, None], halves[0].normals, halves[1].normals), whole.normals))
+    True
     """
     func = "estimate_normals"
     check_args(NORMALS_ARGS, func, k=k, radius=radius)
@@ -156,6 +168,10 @@ def estimate_normals(
                 f"Got {mask.dtype} of shape {mask.shape} instead."
             )
         todo = np.flatnonzero(mask)
+    if part is not None:
+        i_part, n_parts = (int(v) for v in part)
+        if not 0 <= i_part < n_parts:
+            raise ConfigError(f"The 'part' parameter of {func} must be (i, n) with 0 <= i < n. Got {part} instead.")
 
     normals = np.zeros((n, 3))
     curvature = np.full(n, np.nan)
@@ -169,21 +185,23 @@ def estimate_normals(
     rank = np.empty(n, dtype=np.int64)
     rank[tree.indices] = np.arange(n)
     todo = todo[np.argsort(rank[todo], kind="stable")]
+    if part is not None:
+        todo = todo[len(todo) * i_part // n_parts:len(todo) * (i_part + 1) // n_parts]
     bound = np.inf if radius is None else float(radius) * (1 + 1e-12)
     cols = [np.ascontiguousarray(pts[:, axis]) for axis in range(3)]  # faster gathers
     chunk = max(1, _CHUNK_NEIGHBOURS // kk)
     for start in range(0, len(todo), chunk):
         q = todo[start : start + chunk]
-        dist, idx = tree.query(pts[q], k=kk, distance_upper_bound=bound, workers=-1)
+        dist, idx = tree.query(pts[q], k=kk, distance_upper_bound=bound, workers=task_threads())
         nrm, curv, ok = _pca(cols, q, dist.reshape(len(q), kk), idx.reshape(len(q), kk), radius)
         normals[q], curvature[q], valid[q] = nrm, curv, ok
 
-    # Orientation.
+    # Orientation (of the rows computed: the others have no normal to flip).
     if station is not None:
-        toward = np.asarray(viewpoints, dtype=np.float64)[station] - pts
+        toward = np.asarray(viewpoints, dtype=np.float64)[station[todo]] - pts[todo]
     else:
-        toward = pts - pts.mean(axis=0)
-    flip = np.einsum("ij,ij->i", normals, toward) < 0
+        toward = pts[todo] - pts.mean(axis=0)
+    flip = todo[np.einsum("ij,ij->i", normals[todo], toward) < 0]
     normals[flip] *= -1
     return NormalResult(normals=normals, curvature=curvature, valid=valid)
 

@@ -42,9 +42,14 @@ FREE_CELL = 0.1
 
 
 def segment_points(xyz: np.ndarray, params: CoarseParams, eps: float, rng: np.random.Generator,
-                    *, sparse_pass: bool = True) -> tuple[np.ndarray, list[dict[str, Any]], np.ndarray]:
+                    *, sparse_pass: bool = True, normals: tuple[np.ndarray, np.ndarray] | None = None,
+                    ) -> tuple[np.ndarray, list[dict[str, Any]], np.ndarray]:
     """Normals, Efficient RANSAC and DBSCAN on one set of points, then (``sparse_factor``)
     once more, at a coarser scale, on the sparse points the first pass left unsegmented.
+
+    ``normals``: the points' normals and which have one, computed before
+    (:func:`~hollowtree.primitives.normals.estimate_normals` with ``k``, in parts as
+    ``pipeline/coarse.py`` does); None computes them here.
 
     Returns the segment of every point (``1..S``, 0 = unsegmented), the fit of every
     segment (``fits[s - 1]``: ``kind``, ``params`` as a JSON list, ``rms``; kind
@@ -56,18 +61,22 @@ def segment_points(xyz: np.ndarray, params: CoarseParams, eps: float, rng: np.ra
     prims: tuple[Any, ...] = ()
     no_normal = np.zeros(n, dtype=bool)
     if n:
-        nr = estimate_normals(xyz, k=params.k)
-        normals, valid = nr.normals, nr.valid
-        del nr  # the curvature is not used here: 8 bytes a point less during the search
+        if normals is None:
+            nr = estimate_normals(xyz, k=params.k)
+            nrm, valid = nr.normals, nr.valid
+            del nr  # the curvature is not used here: 8 bytes a point less during the search
+        else:
+            nrm, valid = normals
+            normals = None  # held once, as nrm
         no_normal = ~valid
         if valid.sum() >= params.ransac.min_support:
             # A point without a normal has a zero normal, which efficient_ransac leaves
             # unassigned: the whole arrays give the labels xyz[valid] would, without two
             # copies of the points (48 bytes a point) held through the search.
-            res = efficient_ransac(xyz, normals, **params.ransac.to_dict(), rng=rng)
+            res = efficient_ransac(xyz, nrm, **params.ransac.to_dict(), rng=rng)
             labels = res.labels
             prims = res.primitives
-        del normals
+        del nrm
     if labels is None:
         labels = np.full(n, -1, dtype=np.int64)
     free = len(prims)  # the group of points no primitive explains
@@ -166,17 +175,17 @@ def join_passes(xyz: np.ndarray, segment: np.ndarray, fits: list[dict[str, Any]]
 
 
 def segment_block(xyz: np.ndarray, rows: np.ndarray, mine: np.ndarray, b: int, params: CoarseParams,
-                   eps: float, tile: int) -> dict[str, Any]:
+                   eps: float, tile: int, normals: tuple[np.ndarray, np.ndarray] | None = None) -> dict[str, Any]:
     """Segment block ``b`` of a tile with the points within its margin as context.
 
     ``xyz`` are the context's points (store-local metres), ``rows`` their tile rows and
     ``mine`` which of them block ``b`` owns (:func:`block_inputs`). Returns what the join
     needs (:func:`join_blocks`): the block's own rows and their segments, the segmented
     context rows of other blocks and their segments, the fits and the block's points
-    without a normal.
+    without a normal. ``normals``: as :func:`segment_points` takes them.
     """
     rng = np.random.default_rng(np.random.SeedSequence([params.seed, tile, b]))
-    seg, fits, no_normal = segment_points(xyz, params, eps, rng)
+    seg, fits, no_normal = segment_points(xyz, params, eps, rng, normals=normals)
     other = ~mine & (seg > 0)
     return {"own_rows": rows[mine], "own_seg": seg[mine], "other_rows": rows[other], "other_seg": seg[other],
             "fits": fits, "n_invalid": int(no_normal[mine].sum())}
@@ -307,8 +316,9 @@ def join_blocks(n: int, results: Iterable[dict[str, Any]], params: CoarseParams
     return segment, fits, n_invalid
 
 
-def segment_tile(xyz: np.ndarray, params: CoarseParams, eps: float, tile: int, margin: float
-                  ) -> tuple[np.ndarray, list[dict[str, Any]], int, int]:
+def segment_tile(xyz: np.ndarray, params: CoarseParams, eps: float, tile: int, margin: float,
+                 normals: tuple[np.ndarray, np.ndarray] | None = None,
+                 ) -> tuple[np.ndarray, list[dict[str, Any]], int, int]:
     """Segment a tile whole, or block by block when it holds more than ``block_points``.
 
     A dense tile (near a scanner station it can hold several times the average) is cut
@@ -317,12 +327,13 @@ def segment_tile(xyz: np.ndarray, params: CoarseParams, eps: float, tile: int, m
     (:func:`join_blocks`). :func:`run_coarse` runs the blocks of such a tile as tasks of
     their own (:func:`coarse_block`); this in-process loop gives the same answer. Returns
     segment per point, fits per segment, points without a normal and the number of blocks.
+    ``normals`` (a tile segmented whole only): as :func:`segment_points` takes them.
     """
     n = len(xyz)
     cap = params.block_points
     if not cap or n <= cap:
         rng = np.random.default_rng(np.random.SeedSequence([params.seed, tile]))
-        seg, fits, no_normal = segment_points(xyz, params, eps, rng)
+        seg, fits, no_normal = segment_points(xyz, params, eps, rng, normals=normals)
         return seg, fits, int(no_normal.sum()), 1
     n_blocks, inputs = block_inputs(xyz[:, :2], cap, margin)
     results = (segment_block(xyz[rows], rows, mine, b, params, eps, tile) for b, (rows, mine) in enumerate(inputs))

@@ -472,7 +472,7 @@ def test_block_tasks_equal_the_in_process_blocks(blocked8k):
     """run_coarse runs the blocks of a dense tile as tasks of their own and joins them in a
     second round: the tile's segments equal those of the in-process loop, point by point,
     and the blocks' inputs and intermediate results are gone once the tile is recorded."""
-    from hollowtree.pipeline.coarse import BLOCK_STAGE, PLAN_STAGE, _margin, _tile_points
+    from hollowtree.pipeline.coarse import BLOCK_STAGE, PLAN_STAGE, _margin, _unit_xyz
     from hollowtree.primitives.segment import segment_tile
 
     s = RunStore.open(blocked8k[1])
@@ -486,11 +486,11 @@ def test_block_tasks_equal_the_in_process_blocks(blocked8k):
     assert {int(t): r["n_blocks"] for t, r in s.records(PLAN_STAGE).items()} == {t: recs[str(t)]["n_blocks"]
                                                                                 for t in blocked}
     for t in blocked:
-        xyz = _tile_points(s, t, np.asarray(s.attrs["coords"]["scale"]))["local"]
+        xyz = _unit_xyz(s, t, -1)
         seg, _, _, n_blocks = segment_tile(xyz, params, cfg["eps"], t, _margin(s, cfg, params))
         assert n_blocks == recs[str(t)]["n_blocks"]
         assert np.array_equal(s.read_unit(f"coarse/tiles/{t}", ["segment"])["segment"], seg)
-        for group in ("blocks", "block_input", "block_of"):
+        for group in ("blocks", "block_input", "block_of", "normals"):
             assert not s.has(f"coarse/{group}/{t}")
 
 
@@ -600,8 +600,11 @@ def test_dense_tiles_are_stitched_in_parts(scan, tmp_path, monkeypatch):
 
 def test_interrupted_block_tasks_resume(scan, blocked8k, tmp_path):
     """A run stopped after some block tasks resumes: planned tiles are not cut again,
-    recorded blocks are not run again, and the answer is that of an uninterrupted run."""
-    from hollowtree.pipeline.coarse import plan_blocks
+    recorded blocks and normals are not run again, and the answer is that of an
+    uninterrupted run. This runner runs tasks side by side (not ``serial``): blocks take
+    their normals from normals tasks, and give the answer of the one-process run
+    (``blocked8k``), which computes them in the block."""
+    from hollowtree.pipeline.coarse import NORMAL_STAGE, coarse_normals, plan_blocks
 
     params = BLOCKED
     whole = blocked8k[0]
@@ -632,6 +635,7 @@ def test_interrupted_block_tasks_resume(scan, blocked8k, tmp_path):
     with pytest.raises(Stop):
         run_coarse(str(store), params, runner=runner(3))
     assert any(getattr(fn, "fn", fn) is plan_blocks for fn, _, _ in calls)  # in_child(plan_blocks)
+    normals_first = [a for fn, a, _ in calls if getattr(fn, "fn", fn) is coarse_normals]
     calls.clear()
     run_coarse(str(store), params, runner=runner(-1))
     s = RunStore.open(store)
@@ -639,6 +643,41 @@ def test_interrupted_block_tasks_resume(scan, blocked8k, tmp_path):
     assert not any(getattr(fn, "fn", fn) is plan_blocks for fn, _, _ in calls)
     assert sum(is_block(a, d) for _, a, d in calls) == n_blocks - 3
     assert np.array_equal(_labels(scan, store), whole)
+    normals_again = [a for fn, a, _ in calls if getattr(fn, "fn", fn) is coarse_normals]
+    assert normals_first
+    assert len(normals_first) + len(normals_again) == len(s.records(NORMAL_STAGE))
+    assert not any(s.has(f"coarse/normals/{t}") for t in s.records("coarse"))
+
+
+def test_normals_tasks_give_the_answer_of_one_process(scan, tmp_path):
+    """Where tasks run side by side (a runner that is not ``serial``), a unit of more than
+    ``block_points / NORMAL_PARTS`` points (a block, or a tile segmented whole) takes its
+    normals from normals tasks, each a part of the unit's points in its k-d tree's order
+    with the whole unit's tree: the segments equal those of the one-process run, which
+    computes the normals in the unit, point by point."""
+    from hollowtree.pipeline.coarse import NORMAL_STAGE, coarse_normals
+
+    params = CoarseParams(eps=0.3, block_points=12_000)  # at 20 m: tiles of 6.7-11 k whole, 14-20 k cut
+    with task_runner("sync", progress=False) as run:
+        ingest([str(scan)], str(tmp_path / "a"), IngestParams(tile_size=20.0, buffer=2.0), runner=run)
+    shutil.copytree(tmp_path / "a", tmp_path / "b")
+    ran: list[tuple] = []
+
+    def side_by_side(fn, args_list, desc):
+        ran.extend((fn, args) for args in args_list)
+        with task_runner("sync", progress=False) as run:
+            return run(fn, args_list, desc)
+
+    with task_runner("sync", progress=False) as run:
+        run_coarse(str(tmp_path / "a"), params, runner=run)
+    run_coarse(str(tmp_path / "b"), params, runner=side_by_side)
+    assert np.array_equal(_labels(scan, tmp_path / "a"), _labels(scan, tmp_path / "b"))
+    parts = RunStore.open(tmp_path / "b").records(NORMAL_STAGE)
+    units = {k.rsplit(".", 1)[0] for k in parts}
+    assert any(u.endswith(".w") for u in units)  # whole tiles
+    assert any(not u.endswith(".w") for u in units)  # blocks
+    assert sum(getattr(fn, "fn", fn) is coarse_normals for fn, _ in ran) == len(parts)
+    assert RunStore.open(tmp_path / "a").records(NORMAL_STAGE) == {}  # serial: in the unit
 
 
 def test_segment_points_holds_no_copy_of_the_points():
