@@ -62,7 +62,7 @@ PLAN_STAGE = "coarse.plan"
 #: block ``w`` for a tile segmented whole).
 NORMAL_STAGE = "coarse.normals"
 #: Normals tasks per ``block_points`` points of a unit (a block, or a tile segmented
-#: whole): a unit's normals are about a third of its time, and in parts of their own they
+#: whole): a unit's normals are up to about half of its time, and in parts of their own they
 #: no longer sit on the longest chain of tasks (plan, block, join). A unit of at most
 #: ``block_points / NORMAL_PARTS`` points computes its normals itself.
 NORMAL_PARTS = 2
