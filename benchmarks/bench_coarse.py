@@ -35,7 +35,8 @@ normals + RANSAC + DBSCAN time over CGAL normals + RANSAC time <= 1.0 at equal o
 recall.
 
 Run: ``python benchmarks/bench_coarse.py [--sites derawar wazir_khan]
-[--scan-points 1800000] [--crop-points 1000000] [--repeats N [--only-repeats]] [--json PATH]``
+[--scan-points 1800000] [--crop-points 1000000] [--repeats N [--only-repeats]] [--whole [--whole-repeats N]]
+[--json PATH]``
 (default ``benchmarks/results/coarse.json``, with ``--only-repeats`` ``coarse-repeats.json``;
 ``once`` per site: seconds and recall of every method, ``repeats``: the means and per-run recalls).
 """
@@ -47,6 +48,7 @@ import json
 import math
 import os
 import random
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -125,6 +127,7 @@ def run_whole_command(xyz: np.ndarray, tmp: Path) -> float:
     import laspy
 
     las_path, store = tmp / "crop.las", tmp / "crop.zarr"
+    shutil.rmtree(store, ignore_errors=True)  # a second run starts from a new store too
     header = laspy.LasHeader(point_format=6, version="1.4")
     header.scales, header.offsets = np.array([0.001] * 3), xyz.min(axis=0)
     las = laspy.LasData(header)
@@ -552,7 +555,34 @@ def bench_site(site: str, args: argparse.Namespace, tmp: Path) -> dict:
               f"**{summary['whole_ratio']:.2f}** (issue 44: at most 1.0)", flush=True)
     if args.repeats > 1 and not args.no_cgal and not args.no_tuned:
         repeat_tile_kernel_vs_cgal_tuned(xyz, gt_cls, gt_inst, eps, args, tmp, summary)
+    if args.whole_repeats > 0 and not args.no_cgal:
+        repeat_whole_vs_cgal(xyz, args, tmp, summary)
     return summary
+
+
+def repeat_whole_vs_cgal(xyz: np.ndarray, args: argparse.Namespace, tmp: Path, summary: dict) -> None:
+    """Issue 44's comparison, repeated: ``hollowtree coarse`` as a command and CGAL matched
+    (normals + RANSAC, unseeded) one after the other, N times; medians side by side (CGAL's
+    RANSAC time alone varies about 2x from run to run on the same points)."""
+    ours, cgal = [], []
+    for i in range(args.whole_repeats):
+        ours.append(run_whole_command(xyz, tmp))
+        res = run_cgal(xyz, [dict(CGAL_MATCHED)], tmp, args.cgal_normals, 16, args.cgal_timeout)
+        run = res.get("runs", [{}])[0] if "error" not in res else {"error": res["error"]}
+        if "error" in run:
+            print(f"  repeat {i}: CGAL matched failed: {run['error']}", flush=True)
+            continue
+        cgal.append(res["normals_s"] + run["ransac_s"])
+        print(f"  repeat {i}: hollowtree coarse {ours[-1]:.1f} s, CGAL matched {cgal[-1]:.1f} s", flush=True)
+    if not cgal:
+        return
+    mo, mc = float(np.median(ours)), float(np.median(cgal))
+    summary["whole_repeats"] = {"ours_s": ours, "cgal_matched_s": cgal, "ours_median_s": mo,
+                                "cgal_median_s": mc, "ratio_of_medians": mo / mc}
+    print(f"\n`hollowtree coarse` (whole command) against CGAL matched, {len(ours)} runs each, alternating:")
+    print(f"  ours  {' '.join(f'{v:.1f}' for v in ours)} s, median {mo:.1f} s")
+    print(f"  CGAL  {' '.join(f'{v:.1f}' for v in cgal)} s, median {mc:.1f} s")
+    print(f"  ratio of medians **{mo / mc:.2f}** (issue 44: at most 1.0)", flush=True)
 
 
 def repeat_tile_kernel_vs_cgal_tuned(xyz: np.ndarray, gt_cls: np.ndarray, gt_inst: np.ndarray, eps: float,
@@ -602,6 +632,9 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--ours", choices=["kernel", "stage"], default="stage",
                     help="our RANSAC settings: the kernel's defaults or the coarse stage's")
+    ap.add_argument("--whole-repeats", type=int, default=0, metavar="N",
+                    help="also run `hollowtree coarse` and CGAL matched N times each, alternating, and compare "
+                         "their medians (issue 44)")
     ap.add_argument("--whole", action="store_true",
                     help="also time `hollowtree coarse` as a whole command on the crop (issue 44)")
     ap.add_argument("--no-cgal", action="store_true")

@@ -46,6 +46,7 @@ from hollowtree.pipeline.evaluate import evaluate_inputs  # noqa: E402
 from hollowtree.pipeline.tree_stage import TREE_ALGORITHM  # noqa: E402
 from hollowtree.scenes.procedural import FAMILIES, family_of, scan_draw, split_seeds  # noqa: E402
 from hollowtree.scenes.synth import synth  # noqa: E402
+from hollowtree.tiling.grid import GRID_ALGORITHM  # noqa: E402
 
 METHODS = {"tree": ("tree", []), "energy": ("tree", ["tree.decision=energy", "tree.verify=false"]),
            "ransac+dbscan": ("ransac+dbscan", [])}
@@ -169,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
                                "overrides": args.overrides,
                                "seeds": seeds, "points": list(args.points), "workflow": "workflows/local.yaml",
                                "tree_algorithm": TREE_ALGORITHM, "coarse_algorithm": COARSE_ALGORITHM,
-                               "totals": total, "families": fam, "visibility": visibility, "sites": sites,
+                               "grid_algorithm": GRID_ALGORITHM, "totals": total, "families": fam, "visibility": visibility, "sites": sites,
                                "seconds": round(wall, 1)},
                               indent=1) + "\n")
     print(f"results: {out}")

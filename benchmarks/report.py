@@ -32,12 +32,12 @@ RESULTS = REPO / "benchmarks" / "results"
 #: The latest run of each kind of element-recall result (``bench_generalize.py --json``).
 #: These are the figures of docs/generalize.md; edit the file names when a newer run replaces one.
 LATEST = {
-    "test": "generalize-test-tree-v26.json",
+    "test": "generalize-test-grid-v2.json",
     "test-5m": "generalize-test-5m-tree-v25.json",
-    "val-4m": "generalize-val-4m-tree-v26.json",
+    "val-4m": "generalize-val-4m-grid-v2.json",
     "val-1m": "generalize-val-density-1m-tree-v25.json",
     "val-10m": "generalize-val-density-10m-tree-v25.json",
-    "val": "generalize-val-tree-v26.json",
+    "val": "generalize-val-grid-v2.json",
     # the latest run with the paper's energy path (other runs pass --no-energy; it runs with
     # tree.verify=false, so tree-v25 and tree-v26 did not change it)
     "test-energy": "generalize-test-coarse-v7.json",
@@ -70,6 +70,7 @@ VAL_VARIANTS = {
     "generalize-val-4m-coarse-v7.json": "`coarse-v7`: small free clusters spanning 50 cells of 0.1 m are segments",
     "generalize-val-4m-tree-v25.json": "`tree-v25`: the element check on by default, threshold 0.1",
     "generalize-val-4m-tree-v26.json": "`tree-v26`: the check's pillar threshold 0.4",
+    "generalize-val-4m-grid-v2.json": "`grid-v2`: the fewest tiles, centred on the scan",
 }
 
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
@@ -108,8 +109,9 @@ def _points(d: dict) -> str:
 
 
 def _code(d: dict) -> str:
-    """The tree's label a run carried, and the coarse stage's where it was recorded."""
-    return ", ".join(f"`{d[k]}`" for k in ("tree_algorithm", "coarse_algorithm") if k in d) or "?"
+    """The tree's label a run carried, and the coarse stage's and the grid's where they were
+    recorded (runs before ``grid-v2`` carry no grid label)."""
+    return ", ".join(f"`{d[k]}`" for k in ("tree_algorithm", "coarse_algorithm", "grid_algorithm") if k in d) or "?"
 
 
 def _seeds(d: dict) -> str:

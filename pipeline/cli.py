@@ -264,15 +264,26 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _store_scheduler(args: argparse.Namespace, store: Any) -> str | None:
+    """``--scheduler``, or ``"sync"`` where it is not given and the store's inputs hold
+    fewer points than ``cluster.in_process_below`` (the rule of ``hollowtree run``)."""
+    from hollowtree.pipeline.workflow import ClusterSection
+
+    if args.scheduler is not None:
+        return args.scheduler
+    points = sum(int(s.get("point_count", 0)) for s in store.attrs.get("sources", []))
+    return "sync" if points < ClusterSection.model_fields["in_process_below"].default else None
+
+
 def _cmd_tree(args: argparse.Namespace) -> int:
     from hollowtree.pipeline.graph import task_runner, timed_stage
     from hollowtree.pipeline.tree_stage import TreeStageParams, run_tree
     from hollowtree.pipeline.workflow import TreeSection
     from hollowtree.tiling.store import RunStore
 
-    RunStore.open(args.store)
+    scheduler = _store_scheduler(args, RunStore.open(args.store))
     section = _section(TreeSection, args, "tree")
-    with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
+    with task_runner(scheduler, workers=args.workers, progress=not args.no_progress) as run:
         with timed_stage(str(args.store), "tree", run):
             report = run_tree(args.store, TreeStageParams.from_workflow(section), runner=run, device=section.device)
     print(report.summary())
@@ -284,7 +295,8 @@ def _cmd_labels(args: argparse.Namespace) -> int:
     from hollowtree.pipeline.labels import run_labels
     from hollowtree.tiling.store import RunStore
 
-    stages = RunStore.open(args.store).attrs.get("stages", {})
+    store = RunStore.open(args.store)
+    stages = store.attrs.get("stages", {})
 
     def complete(stage: str) -> bool:
         st = stages.get(stage)
@@ -295,7 +307,7 @@ def _cmd_labels(args: argparse.Namespace) -> int:
     use_tree = not args.no_tree and complete("tree")
     if not args.no_tree and not use_tree:
         print(f"{args.store}: no complete tree stage; labels from the coarse segments", file=sys.stderr)
-    with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
+    with task_runner(_store_scheduler(args, store), workers=args.workers, progress=not args.no_progress) as run:
         with timed_stage(str(args.store), "labels", run):
             report = run_labels(args.store, use_tree=use_tree, runner=run)
     print(report.summary())
@@ -504,9 +516,10 @@ def _cmd_coarse(args: argparse.Namespace) -> int:
     from hollowtree.pipeline.workflow import CoarseSection
     from hollowtree.tiling.store import RunStore
 
-    RunStore.open(args.store)  # a missing store or another schema fails before any cluster starts
+    # a missing store or another schema fails before any cluster starts
+    scheduler = _store_scheduler(args, RunStore.open(args.store))
     section = _section(CoarseSection, args, "coarse", {"free_segments": False} if args.no_free_segments else None)
-    with task_runner(args.scheduler, workers=args.workers, progress=not args.no_progress) as run:
+    with task_runner(scheduler, workers=args.workers, progress=not args.no_progress) as run:
         with timed_stage(str(args.store), "coarse", run):
             report = run_coarse(args.store, CoarseParams.from_workflow(section), runner=run)
     print(report.summary())

@@ -94,7 +94,9 @@ def _workers_flag(parser: argparse.ArgumentParser) -> None:
 
 def _cluster_args(parser: argparse.ArgumentParser) -> None:
     """Where a step command's tasks run, and its progress bars."""
-    parser.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process")
+    parser.add_argument("--scheduler", help="Dask scheduler address; 'sync' runs in this process (default: a local "
+                                            "cluster, or this process for a store of under cluster.in_process_below "
+                                            "input points)")
     _workers_flag(parser)
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 

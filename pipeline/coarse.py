@@ -556,7 +556,8 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
     blocks_done = set(stage.done(BLOCK_STAGE))
     normals_done = set(stage.done(NORMAL_STAGE))
     # Units of many points compute their normals in tasks of their own first (NORMAL_PARTS),
-    # where tasks run side by side; in one process that would only repeat the k-d trees.
+    # where tasks run side by side; one task at a time (in process, one worker) that would
+    # only repeat the k-d trees.
     split = not getattr(runner, "serial", False)
     plan_fn, unit_fn, join_fn = in_child(plan_blocks), in_child(_coarse_unit, load_kernels), in_child(coarse_tile)
     normals_fn = in_child(coarse_normals)

@@ -614,6 +614,7 @@ def task_runner(
                 run.dashboard_link = lambda: local.client.dashboard_link  # type: ignore[attr-defined]
                 if processes:  # our own worker processes: fresh_workers may replace them
                     run.restart_workers = local.renew  # type: ignore[attr-defined]
+                run.serial = workers == 1  # type: ignore[attr-defined]  # one thread: nothing runs beside a task
                 yield run
             finally:
                 local.close()

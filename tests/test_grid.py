@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -111,16 +112,15 @@ def test_outside_points_raise_or_flag():
     assert c.tolist() == [True, False, True]
 
 
-def test_covering_snaps_and_covers():
+def test_covering_centres_the_fewest_tiles():
     g = TileGrid.covering(12.0, -3.0, 31.0, 9.0, tile_size=10.0, buffer=2.0)
-    assert g.origin == (10.0, -10.0)
-    assert g.shape == (3, 2)
-    # A second grid over other bounds shares the edges.
-    h = TileGrid.covering(-5.0, 0.0, 15.0, 1.0, tile_size=10.0, buffer=2.0)
-    assert set(g.edges()[0]) & set(h.edges()[0]) == {10.0, 20.0}
-    # Degenerate bounds still give one tile; a maximum on an edge is covered.
+    assert g.origin == (11.5, -7.0)
+    assert g.shape == (2, 2)
+    # Bounds that straddle a multiple of the tile size still fit in one tile.
+    assert TileGrid.covering(-10.7, -17.9, 31.7, 24.4, tile_size=60.0, buffer=2.0).shape == (1, 1)
+    # Degenerate bounds still give one tile; a span of exactly k tiles needs k + 1 (half-open cores).
     assert TileGrid.covering(5.0, 5.0, 5.0, 5.0, tile_size=10.0, buffer=0.0).shape == (1, 1)
-    assert TileGrid.covering(0.0, 0.0, 20.0, 10.0, tile_size=10.0, buffer=0.0).shape == (2, 1)
+    assert TileGrid.covering(0.0, 0.0, 20.0, 10.0, tile_size=10.0, buffer=0.0).shape == (3, 2)
 
 
 @settings(max_examples=200, deadline=None)
@@ -135,7 +135,13 @@ def test_covering_property(lo, span, size):
     g = TileGrid.covering(xmin, ymin, xmax, ymax, tile_size=size, buffer=0.0)
     corners = np.array([[xmin, ymin], [xmax, ymax], [xmin, ymax], [xmax, ymin]])
     assert (g.core_tile(corners) >= 0).all()
-    assert g.origin[0] / size == pytest.approx(round(g.origin[0] / size))
+    # fewest tiles (one more only where rounding at a large offset asks for it), centred
+    for axis, (a, b) in enumerate(((xmin, xmax), (ymin, ymax))):
+        assert g.shape[axis] - (math.floor((b - a) / size) + 1) in (0, 1)
+        right = g.origin[axis] + g.shape[axis] * size - b
+        assert g.origin[axis] <= a
+        assert right > 0
+        assert (a - g.origin[axis]) == pytest.approx(right, abs=1e-6 * max(1.0, abs(a), size))
     ex, ey = g.edges()
     # smallest: dropping a column or row would uncover the maximum (cores are half-open,
     # so a maximum exactly on the last inner edge belongs to the last column)

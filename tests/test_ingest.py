@@ -92,6 +92,26 @@ def test_rerun_skips_everything(scan_file, tmp_path):
     assert again.tiles_skipped == again.n_tiles
 
 
+def test_a_store_keeps_the_grid_it_was_made_with(monkeypatch, scan_file, tmp_path):
+    """A store laid out by another version's grid rule resumes with its own grid."""
+    first = _ingest([scan_file], tmp_path / "s")
+    grid = RunStore.open(tmp_path / "s").attrs["grid"]
+    covering = TileGrid.covering.__func__
+
+    def shifted(cls, *args, **kw):
+        g = covering(cls, *args, **kw)
+        return TileGrid(origin=(g.origin[0] - 3.0, g.origin[1]), tile_size=g.tile_size, buffer=g.buffer,
+                        shape=(g.shape[0] + 1, g.shape[1]))
+
+    monkeypatch.setattr(TileGrid, "covering", classmethod(shifted))
+    again = _ingest([scan_file], tmp_path / "s")
+    assert RunStore.open(tmp_path / "s").attrs["grid"] == grid
+    assert (again.tiles_run, again.maps_run, again.n_tiles) == (0, 0, first.n_tiles)
+    other = _ingest([scan_file], tmp_path / "t")  # a new store takes this version's grid
+    assert RunStore.open(tmp_path / "t").attrs["grid"] != grid
+    assert other.n_tiles == first.n_tiles + TileGrid.from_dict(grid).shape[1]
+
+
 def test_other_parameters_are_refused(scan_file, tmp_path, capsys):
     _ingest([scan_file], tmp_path / "s")
     code = main(["ingest", str(scan_file), "--store", str(tmp_path / "s"), "--tile-size", "20",

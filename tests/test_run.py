@@ -305,6 +305,7 @@ def test_fresh_workers_replaces_only_our_own_worker_processes():
         fresh_workers(run)
         assert run(os.getpid, [()], "pid") == [os.getpid()]
     with task_runner(None, workers=1, progress=False) as run:
+        assert run.serial  # one worker thread: nothing runs beside a task
         link = run.dashboard_link()
         before = run(os.getpid, [()], "pid")
         fresh_workers(run)
@@ -467,3 +468,28 @@ def test_an_unreachable_scheduler_is_one_line_and_leaves_no_folder(scan, tmp_pat
     assert len(r.stderr.strip().splitlines()) == 1
     assert "cannot reach the Dask scheduler" in r.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_step_commands_run_a_small_store_in_their_own_process(tmp_path, monkeypatch, capsys):
+    """`hollowtree coarse` / `tree` / `labels` follow `run`'s rule: a store of under
+    `cluster.in_process_below` input points runs in process unless --scheduler says otherwise."""
+    from hollowtree.pipeline import graph
+    from hollowtree.pipeline.cli import main
+    from hollowtree.scenes.synth import synth
+
+    scan = tmp_path / "m.laz"
+    synth("minaret", scan, n_points=20_000, seed=1)
+    assert main(["ingest", str(scan), "--store", str(tmp_path / "s"), "--scheduler", "sync", "--no-progress"]) == 0
+    asked: list[str | None] = []
+    real = graph.task_runner
+
+    def recording(scheduler=None, **kw):
+        asked.append(scheduler)
+        return real("sync", **kw)  # no cluster in this test either way
+
+    monkeypatch.setattr(graph, "task_runner", recording)
+    assert main(["coarse", str(tmp_path / "s"), "--no-progress"]) == 0
+    assert main(["labels", str(tmp_path / "s"), "--no-tree", "--no-progress"]) == 0
+    assert main(["coarse", str(tmp_path / "s"), "--no-progress", "--scheduler", "tcp://nowhere:1"]) == 0
+    assert asked == ["sync", "sync", "tcp://nowhere:1"]
+    capsys.readouterr()

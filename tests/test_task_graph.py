@@ -98,6 +98,7 @@ def test_a_local_cluster_runs_the_graph_beside_the_other_tasks():
 
     first = [Task(job, ("long", 1.5), 1, "long"), Task(job, ("plan", 0.05), 100, "plan")]
     with task_runner(None, workers=2, processes=False, progress=False) as run:
+        assert not run.serial  # tasks side by side: the coarse stage splits its normals
         run_graph(run, first, then, "graph")
     assert set(started) == {"long", "plan", "block0", "block1", "block2"}
     assert max(started[f"block{b}"] for b in range(3)) < started["long"] + 1.0  # not after the long task

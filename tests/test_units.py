@@ -22,12 +22,12 @@ from hollowtree.tiling.store import RunStore
 
 @pytest.fixture(scope="module")
 def uneven(tmp_path_factory) -> Path:
-    """A minaret on 20 m tiles: its tiles hold 61 to 19 859 points (12.7x the median)."""
+    """A minaret on 10 m tiles: its tiles hold 61 to 12 240 points (10.4x the median)."""
     d = tmp_path_factory.mktemp("units")
     synth("minaret", d / "m.laz", n_points=60_000, seed=2)
     store = d / "s"
     with task_runner("sync", progress=False) as run:
-        ingest([str(d / "m.laz")], str(store), IngestParams(tile_size=20.0, buffer=2.0), runner=run)
+        ingest([str(d / "m.laz")], str(store), IngestParams(tile_size=10.0, buffer=2.0), runner=run)
         run_coarse(str(store), CoarseParams(eps=0.3, block_points=20_000), runner=run)
         run_tree(str(store), TreeStageParams(batch_points=2_000), runner=run)
         run_labels(str(store), use_tree=True, runner=run)

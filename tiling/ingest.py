@@ -509,6 +509,12 @@ def ingest(
     t0 = time.perf_counter()
     url = str(url)
     plan = plan_ingest(inputs, params)
+    if not replace and RunStore.exists(url):
+        kept = RunStore.open(url).attrs.get("grid")
+        if kept and kept != plan.grid.to_dict():  # laid out by another version: resume with its grid
+            again = plan_ingest(inputs, params, grid=TileGrid.from_dict(kept))
+            if again.params_hash == RunStore.open(url).attrs.get("ingest", {}).get("params_hash"):
+                plan = again
     store = open_for_ingest(url, plan, replace=replace)
     attrs = store.attrs
     h = plan.params_hash

@@ -180,8 +180,11 @@ def _metres_per_unit(sources: Sequence[SourceInfo], params: IngestParams) -> tup
     return np.asarray(f, float), f"{name} ({f[0]:g} m, from the CRS)"
 
 
-def plan_ingest(inputs: Sequence[str | Path], params: IngestParams) -> IngestPlan:
+def plan_ingest(inputs: Sequence[str | Path], params: IngestParams, *, grid: TileGrid | None = None) -> IngestPlan:
     """Probe the inputs and fix the grid, the coordinate grid and the map units.
+
+    ``grid``: this tile grid instead of the one the bounds and parameters give (a store's
+    own, to resume it with the grid it was made with).
 
     Raises
     ------
@@ -204,13 +207,14 @@ def plan_ingest(inputs: Sequence[str | Path], params: IngestParams) -> IngestPla
     hi = np.max([b[1] for b in bounds], axis=0) * f
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
         raise CorruptInputError(f"{sources[0].path}: no finite coordinates in the inputs")
-    tile_size = params.tile_size
-    if tile_size is None:
-        tile_size = auto_tile_size(
-            float(hi[0] - lo[0]), float(hi[1] - lo[1]), sum(s.point_count for s in sources),
-            tile_points=params.tile_points, buffer=params.buffer, voxel=params.voxel,
-        )
-    grid = TileGrid.covering(lo[0], lo[1], hi[0], hi[1], tile_size=tile_size, buffer=params.buffer)
+    if grid is None:
+        tile_size = params.tile_size
+        if tile_size is None:
+            tile_size = auto_tile_size(
+                float(hi[0] - lo[0]), float(hi[1] - lo[1]), sum(s.point_count for s in sources),
+                tile_points=params.tile_points, buffer=params.buffer, voxel=params.voxel,
+            )
+        grid = TileGrid.covering(lo[0], lo[1], hi[0], hi[1], tile_size=tile_size, buffer=params.buffer)
 
     las = [s for s in sources if s.scale is not None]
     scale = np.full(3, FLOAT_SOURCE_SCALE)
