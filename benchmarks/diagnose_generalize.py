@@ -7,7 +7,8 @@ wrong class (cut out right, named wrong), leaves not grouped (cut out in pieces)
 fragments (no coarse segment holds half of it) or not cut out (one segment holds most of
 it and nothing separated it). It prints a table per class and what the wrong classes were.
 
-Run: ``python benchmarks/diagnose_generalize.py out/generalize [--tiny 100] [--json PATH]``.
+Run: ``python benchmarks/diagnose_generalize.py out/generalize [--tiny 100] [--json PATH]``;
+``--flips A.json B.json`` compares two such outputs of the same scans (two tile layouts).
 A tool for the validation split: reading it on test seeds to choose anything breaks the
 protocol of docs/generalize.md.
 """
@@ -68,12 +69,33 @@ def diagnose_store(store_path: Path, *, tiny: int) -> tuple[list[dict], list[dic
     return rows, fps
 
 
+def flips(a: list[dict], b: list[dict]) -> list[tuple[dict, dict]]:
+    """The elements (``--json``'s ``lost`` rows of two runs of the same scans, e.g. two tile
+    layouts) found in one run and not in the other, as pairs of their rows."""
+    rows = {(r["store"], r["instance"]): r for r in b}
+    return [(r, rows[k]) for r in a if (k := (r["store"], r["instance"])) in rows
+            and (r["bucket"] == "found") != (rows[k]["bucket"] == "found")]
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("paths", nargs="+", type=Path, help="a bench_generalize --work folder or stores")
+    ap.add_argument("paths", nargs="*", type=Path, help="a bench_generalize --work folder or stores")
+    ap.add_argument("--flips", nargs=2, type=Path, metavar=("A.json", "B.json"),
+                    help="compare two --json outputs of the same scans: elements found in one only")
     ap.add_argument("--tiny", type=int, default=100, help="elements under this many points are 'tiny'")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
+    if args.flips:
+        a, b = (json.loads(p.read_text())["lost"] for p in args.flips)
+        pairs = flips(a, b)
+        found = [sum(r["bucket"] == "found" for r in x) for x in (a, b)]
+        print(f"elements {len(a)}; found {found[0]} and {found[1]}; found in one run only {len(pairs)} "
+              f"({100 * len(pairs) / max(len(a), 1):.1f} %)")
+        for (cls, x, y), n in Counter((r["class"], r["bucket"], s["bucket"]) for r, s in pairs).most_common():
+            print(f"  {n:4} {cls}: {x} -> {y}")
+        return 0
+    if not args.paths:
+        ap.error("name a work folder or stores (or --flips A.json B.json)")
     stores = []
     for p in args.paths:
         stores += sorted((p / "stores").glob("*.zarr")) if (p / "stores").is_dir() else [p]

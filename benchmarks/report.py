@@ -32,12 +32,12 @@ RESULTS = REPO / "benchmarks" / "results"
 #: The latest run of each kind of element-recall result (``bench_generalize.py --json``).
 #: These are the figures of docs/generalize.md; edit the file names when a newer run replaces one.
 LATEST = {
-    "test": "generalize-test-grid-v2.json",
+    "test": "generalize-test-tree-v27.json",
     "test-5m": "generalize-test-5m-tree-v25.json",
-    "val-4m": "generalize-val-4m-grid-v2.json",
+    "val-4m": "generalize-val-4m-tree-v27.json",
     "val-1m": "generalize-val-density-1m-tree-v25.json",
     "val-10m": "generalize-val-density-10m-tree-v25.json",
-    "val": "generalize-val-grid-v2.json",
+    "val": "generalize-val-tree-v27.json",
     # the latest run with the paper's energy path (other runs pass --no-energy; it runs with
     # tree.verify=false, so tree-v25 and tree-v26 did not change it)
     "test-energy": "generalize-test-coarse-v7.json",
@@ -71,6 +71,7 @@ VAL_VARIANTS = {
     "generalize-val-4m-tree-v25.json": "`tree-v25`: the element check on by default, threshold 0.1",
     "generalize-val-4m-tree-v26.json": "`tree-v26`: the check's pillar threshold 0.4",
     "generalize-val-4m-grid-v2.json": "`grid-v2`: the fewest tiles, centred on the scan",
+    "generalize-val-4m-tree-v27.json": "`tree-v27`: no transport curve under 15 % of the footprint",
 }
 
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
@@ -297,29 +298,6 @@ def coarse_repeats() -> str:
         cells = [f"{r[f'{k}_s']:.2f} / **{r[f'{k}_recall']:.3f}** ({' '.join(f'{x:.2f}' for x in r[f'{k}_recalls'])})"
                  for k in ("ours", "cgal_tuned")]
         out.append(f"| {s['site']} | {cells[0]} | {cells[1]} | **{r['ratio_of_means']:.2f}** |")
-    return "\n".join(out)
-
-
-def coarse_once() -> str:
-    """``bench_coarse.py``: every method once, seconds / recall; the best recall per site in bold."""
-    d = _load("coarse.json")
-    sites = [s for s in d["sites"] if s.get("once")]
-    methods = [m["method"] for m in sites[0]["once"]]
-    out = ["| site | " + " | ".join(methods) + " |", "| --- |" + " --- |" * len(methods)]
-    for s in sites:
-        best = max(f"{m['recall']:.2f}" for m in s["once"])
-        cells = [f"{m['s']:.1f} / " + (f"**{best}**" if f"{m['recall']:.2f}" == best else f"{m['recall']:.2f}")
-                 for m in s["once"]]
-        out.append(f"| {s['site']} | " + " | ".join(cells) + " |")
-    return "\n".join(out)
-
-
-def sparse_points() -> str:
-    """``bench_sparse_points.py``: the spacing test against the query it replaced."""
-    d = _load("sparse-points.json")
-    out = ["| site | sparse rows | before s | after s | ratio |", "| --- | ---: | ---: | ---: | ---: |"]
-    out += [f"| {r['site']} | {_n(r['sparse_rows'])} | {r['before_s']:.3f} | {r['after_s']:.3f} | {r['ratio']:.2f} |"
-            for r in d["rows"]]
     return "\n".join(out)
 
 
@@ -552,8 +530,6 @@ GENERATORS: dict[str, Callable[[], str]] = {
     "synth": synth,
     "ingest": ingest,
     "coarse-repeats": coarse_repeats,
-    "coarse-once": coarse_once,
-    "sparse-points": sparse_points,
     "hollownet": hollownet,
     "tree-segments": tree_segments,
     "tree-whole": tree_whole,

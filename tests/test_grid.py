@@ -125,6 +125,25 @@ def test_covering_centres_the_fewest_tiles():
 
 @settings(max_examples=200, deadline=None)
 @given(
+    lo=st.tuples(st.floats(-1e6, 1e6), st.floats(-1e6, 1e6)),
+    span=st.tuples(st.floats(0, 1e4), st.floats(0, 1e4)),
+    at=st.tuples(st.floats(-1e6, 1e6), st.floats(-1e6, 1e6)),
+    size=sizes,
+)
+def test_covering_aligned_puts_an_edge_through_the_point(lo, span, at, size):
+    xmin, ymin = lo
+    xmax, ymax = xmin + span[0], ymin + span[1]
+    g = TileGrid.covering(xmin, ymin, xmax, ymax, tile_size=size, buffer=0.0, align=at)
+    corners = np.array([[xmin, ymin], [xmax, ymax], [xmin, ymax], [xmax, ymin]])
+    assert (g.core_tile(corners) >= 0).all()
+    for axis in (0, 1):
+        k = (g.origin[axis] - at[axis]) / size
+        assert abs(k - round(k)) < 1e-6 * max(1.0, abs(k))  # an edge passes through ``at``
+        assert g.shape[axis] <= math.floor((span[axis]) / size) + 2  # one tile more than centred at most
+
+
+@settings(max_examples=200, deadline=None)
+@given(
     lo=st.tuples(st.floats(-1e7, 1e7), st.floats(-1e7, 1e7)),
     span=st.tuples(st.floats(0, 1e4), st.floats(0, 1e4)),
     size=sizes,

@@ -112,6 +112,21 @@ def test_a_store_keeps_the_grid_it_was_made_with(monkeypatch, scan_file, tmp_pat
     assert other.n_tiles == first.n_tiles + TileGrid.from_dict(grid).shape[1]
 
 
+def test_tile_origin_puts_the_tile_edges_through_it(scan_file, tmp_path):
+    """``ingest.tile_origin``: the edges pass through the point given, every point is in a
+    core once, and the store records the key (a store without it keeps its old hash)."""
+    plain = _ingest([scan_file], tmp_path / "c")
+    at = (3.25, -1.5)
+    moved = _ingest([scan_file], tmp_path / "s", tile_origin=at)
+    grid = TileGrid.from_dict(RunStore.open(tmp_path / "s").attrs["grid"])
+    assert [round((grid.origin[i] - at[i]) / 10.0, 9) % 1 for i in (0, 1)] == [0.0, 0.0]
+    assert grid.origin != TileGrid.from_dict(RunStore.open(tmp_path / "c").attrs["grid"]).origin
+    cores = sum(int(t["core"].sum()) for t in _tiles(tmp_path / "s").values())
+    assert cores == moved.n_core_points == plain.n_core_points == plain.n_points_in
+    assert RunStore.open(tmp_path / "s").attrs["ingest"]["params"]["tile_origin"] == list(at)
+    assert "tile_origin" not in RunStore.open(tmp_path / "c").attrs["ingest"]["params"]
+
+
 def test_other_parameters_are_refused(scan_file, tmp_path, capsys):
     _ingest([scan_file], tmp_path / "s")
     code = main(["ingest", str(scan_file), "--store", str(tmp_path / "s"), "--tile-size", "20",

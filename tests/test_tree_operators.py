@@ -204,6 +204,30 @@ def test_sequences_on_toy_shapes():
     assert s1(wall[:1], rng=0) is None
 
 
+def test_a_colonnade_under_a_slab_has_no_transport_curve_whatever_the_seed():
+    """psi's best circle on a slab over a grid of posts holds a tenth of the footprint and moves
+    with the seed; below ``curve_min_inliers`` S1 and S3 propose nothing, for every seed."""
+    rng = np.random.default_rng(5)
+    slab = np.column_stack([rng.uniform(0, 6, 20000), rng.uniform(0, 7, 20000), rng.uniform(3.0, 3.4, 20000)])
+    posts = []
+    for x in (0.3, 3.0, 5.7):
+        for y in (0.3, 2.4, 4.6, 6.7):
+            t, z = rng.uniform(0, 2 * np.pi, 1500), rng.uniform(0, 3, 1500)
+            posts.append(np.column_stack([x + 0.25 * np.cos(t), y + 0.25 * np.sin(t), z]))
+    pavilion = np.vstack([slab, *posts])
+    shares = [psi(pavilion[:, :2], rng=seed).inlier_fraction for seed in range(5)]
+    assert 0 < max(shares) < SequenceParams().curve_min_inliers  # a fit, but no ring
+    for seed in range(5):
+        assert s1(pavilion, rng=seed) is None
+        assert s3(pavilion, rng=seed) is None
+        assert s3(pavilion, params=SequenceParams(curve_min_inliers=0.0), rng=seed) is not None  # what it stops
+    # a round tower keeps its curve: its footprint is one ring
+    z = rng.uniform(0, 12, 20000)
+    t = rng.uniform(0, 2 * np.pi, 20000)
+    tower = np.column_stack([1.5 * np.cos(t), 1.5 * np.sin(t), z])
+    assert psi(tower[:, :2], rng=0).inlier_fraction > 0.9
+
+
 def _facade(solid, *, top: float, step: float = 0.05) -> np.ndarray:
     """Points on a grid of a vertical facade in the x-z plane where ``solid(t, z)``."""
     t, z = np.meshgrid(np.arange(0, 20, step), np.arange(0, top, step))

@@ -131,10 +131,11 @@ class TileGrid:
 
     @classmethod
     def covering(
-        cls, xmin: float, ymin: float, xmax: float, ymax: float, *, tile_size: float, buffer: float
+        cls, xmin: float, ymin: float, xmax: float, ymax: float, *, tile_size: float, buffer: float,
+        align: tuple[float, float] | None = None,
     ) -> TileGrid:
         """Return the grid of fewest tiles whose cores cover ``[xmin, xmax] x [ymin, ymax]``,
-        centred on the bounds.
+        centred on the bounds, or with edges through the point ``align`` where given.
 
         Along each axis ``floor(span / tile_size) + 1`` tiles (cores are half-open, so the
         maximum needs the slack), with the slack split evenly on both sides. A grid
@@ -149,22 +150,33 @@ class TileGrid:
         ((11.5, -7.0), (2, 2))
         >>> TileGrid.covering(-10.7, -17.9, 31.7, 24.4, tile_size=60.0, buffer=2.0).shape
         (1, 1)
+        >>> g = TileGrid.covering(12.0, -3.0, 31.0, 9.0, tile_size=10.0, buffer=2.0, align=(0.0, 5.0))
+        >>> g.origin, g.shape
+        ((10.0, -5.0), (3, 2))
         """
         lo = [_number("xmin", xmin), _number("ymin", ymin)]
         hi = [_number("xmax", xmax), _number("ymax", ymax)]
         size = _number("tile_size", tile_size)
         if not size > 0:
             raise ConfigError(f"The 'tile_size' parameter of TileGrid must be > 0; got {tile_size!r}.")
+        at = None if align is None else (_number("align", align[0]), _number("align", align[1]))
         origin, shape = [], []
         for axis, (a, b) in enumerate(zip(lo, hi, strict=True)):
             if b < a:
                 name = "xy"[axis]
                 raise ConfigError(f"TileGrid.covering needs {name}min <= {name}max; got {a!r} > {b!r}.")
-            n = max(1, math.floor((b - a) / size) + 1)
-            o = a - (n * size - (b - a)) / 2.0
-            while not (o <= a and b < o + n * size):  # guard against rounding at large offsets
-                n += 1
+            if at is not None:
+                o = at[axis] + math.floor((a - at[axis]) / size) * size
+                n = max(1, math.floor((b - o) / size) + 1)
+            else:
+                n = max(1, math.floor((b - a) / size) + 1)
                 o = a - (n * size - (b - a)) / 2.0
+            while not (o <= a and b < o + n * size):  # guard against rounding at large offsets
+                if at is not None:
+                    o, n = (o - size, n + 1) if a < o else (o, n + 1)
+                else:
+                    n += 1
+                    o = a - (n * size - (b - a)) / 2.0
             origin.append(o)
             shape.append(n)
         return cls(origin=(origin[0], origin[1]), tile_size=size, buffer=buffer,

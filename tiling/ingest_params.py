@@ -31,6 +31,10 @@ class IngestParams(Params, owner="ingest"):
         most the points the voxel grid can keep, :func:`auto_tile_size`).
     tile_points : int
         Target points per tile for the automatic tile size (default 2 000 000).
+    tile_origin : (x, y) or None
+        A point the tile edges pass through (the inputs' coordinates, like ``bbox``): tiles
+        that line up across runs or with a survey's own tiling (PDAL ``filters.splitter``'s
+        ``origin_x``/``origin_y``). None (the default) centres the fewest tiles on the scan.
     buffer : float
         Width of the ring of neighbours' points copied into each tile, metres (default 2).
     voxel : float or None
@@ -52,6 +56,9 @@ class IngestParams(Params, owner="ingest"):
 
     tile_size: float | None = param(None, gt=0, doc="tile core side, metres; null = about tile_points points per tile")
     tile_points: int = param(2_000_000, ge=1, doc="target points per tile for the automatic tile size")
+    tile_origin: tuple[float, float] | None = param(
+        None, check=lambda o: None if len(o) == 2 else "must be [x, y]",
+        doc="[x, y] the tile edges pass through (inputs' coordinates); null = the fewest tiles centred on the scan")
     buffer: float = param(2.0, ge=0, doc="buffer width, metres")
     voxel: float | None = param(None, gt=0, doc="keep one point per voxel of this size, metres; null = all")
     bbox: tuple[float, float, float, float] | None = param(
@@ -81,6 +88,10 @@ class IngestParams(Params, owner="ingest"):
         d["tiles"] = list(self.tiles) if self.tiles is not None else None
         if self.units is None:  # as stores made before the key recorded it
             del d["units"]
+        if self.tile_origin is None:  # likewise
+            del d["tile_origin"]
+        else:
+            d["tile_origin"] = list(self.tile_origin)
         return d
 
     @classmethod

@@ -214,7 +214,8 @@ def plan_ingest(inputs: Sequence[str | Path], params: IngestParams, *, grid: Til
                 float(hi[0] - lo[0]), float(hi[1] - lo[1]), sum(s.point_count for s in sources),
                 tile_points=params.tile_points, buffer=params.buffer, voxel=params.voxel,
             )
-        grid = TileGrid.covering(lo[0], lo[1], hi[0], hi[1], tile_size=tile_size, buffer=params.buffer)
+        align = None if params.tile_origin is None else (params.tile_origin[0] * f[0], params.tile_origin[1] * f[1])
+        grid = TileGrid.covering(lo[0], lo[1], hi[0], hi[1], tile_size=tile_size, buffer=params.buffer, align=align)
 
     las = [s for s in sources if s.scale is not None]
     scale = np.full(3, FLOAT_SOURCE_SCALE)

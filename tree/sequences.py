@@ -104,6 +104,10 @@ class SequenceParams(Params, owner="SequenceParams"):
                               "neighbour across the weaker cut (a peak in a sparse stretch is not a boundary)")
     residual_threshold: float | None = param(
         None, gt=0, doc="circle/n-gon RANSAC inlier distance; None = 1 % of the footprint")
+    curve_min_inliers: float = param(
+        0.15, ge=0, lt=1, doc="a transport curve holding fewer of the footprint's points than this share is none: "
+                              "S1 and S3 propose nothing (a circle through some posts of a colonnade or the edge of "
+                              "a slab is no ring; chosen on training seeds, docs/generalize.md)")
     flat_ratio: float = param(
         0.05, ge=0, doc="a node is flat, and :func:`tree.build.build_tree` does not split it, when its height (1st "
                         "to 99th percentile of z) is under ``max(flat_height, flat_ratio x its larger horizontal "
@@ -244,7 +248,7 @@ def _with_curve(xyz: npt.ArrayLike, params: SequenceParams | None, rng: RngLike,
         return a, params, None
     if curve is None:
         fit = psi(v1(a), residual_threshold=params.residual_threshold, rng=rng)
-        curve = fit if isinstance(fit, TransportCurve) else None
+        curve = fit if isinstance(fit, TransportCurve) and fit.inlier_fraction >= params.curve_min_inliers else None
     return a, params, curve
 
 
