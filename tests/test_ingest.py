@@ -138,6 +138,17 @@ def test_other_parameters_are_refused(scan_file, tmp_path, capsys):
     assert "20" in err
 
 
+def test_replace_ingests_anew_with_the_other_parameters(scan_file, tmp_path):
+    """``replace`` (``hollowtree run`` after a changed ingest parameter) empties the store
+    and ingests anew: the same tiles as a new store of those parameters."""
+    _ingest([scan_file], tmp_path / "s")
+    params = IngestParams(tile_size=20.0, buffer=1.0, chunk_size=20_000)
+    with task_runner("sync", progress=False) as run:
+        ingest([str(scan_file)], str(tmp_path / "s"), params, replace=True, runner=run)
+    _ingest([scan_file], tmp_path / "fresh", tile_size=20.0)
+    _assert_same_tiles(tmp_path / "s", tmp_path / "fresh")
+
+
 def test_unknown_schema_version_is_refused(scan_file, tmp_path):
     _ingest([scan_file], tmp_path / "s")
     RunStore.open(tmp_path / "s", mode="a").update_attrs({"schema_version": 99})

@@ -157,12 +157,12 @@ class RunStore:
         """
         for name in list(self._root.group_keys()) + list(self._root.array_keys()):
             del self._root[name]
+        fs, base = self._fs()
+        if fs.exists(base):  # fragment files beside the hierarchy; before the group is made again
+            fs.rm(base, recursive=True)
         self._root.attrs.put({"schema_version": SCHEMA_VERSION, **attrs})
         for name in ("tiles", "fragments", "records"):
             self._root.require_group(name)
-        fs, base = self._fs()
-        if fs.exists(base):
-            fs.rm(base, recursive=True)
 
     @staticmethod
     def exists(url: str | Path) -> bool:
@@ -343,6 +343,8 @@ class RunStore:
             "groups": np.asarray(groups, dtype=np.int64).reshape(-1, 2).tolist(),
         }).encode()
         fs, base = self._fs()
+        if not _is_url(self.url):  # a store left without the folder by an older reset
+            Path(base).mkdir(parents=True, exist_ok=True)
         with fs.open(f"{base}/{key}.frag", "wb") as f:
             f.write(FRAGMENT_MAGIC + np.uint64(len(header)).tobytes() + header)
             for block in blocks:
