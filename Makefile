@@ -31,7 +31,7 @@ demo: $(STAMP)
 # Two pytest workers, one per core, each taking whole files (a file's module fixtures are
 # built once): 604 s against 820 s one after another, measured side by side.
 test: $(STAMP)
-	$(PY) -m pytest -q -n 2 --dist loadfile
+	$(PY) -m pytest -q -n 2 --dist loadfile --durations=15
 
 bench: $(STAMP)
 	$(PY) benchmarks/bench_synth.py

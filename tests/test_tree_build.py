@@ -258,14 +258,44 @@ def test_a_sparse_plain_wall_is_not_cut_at_its_noise(monkeypatch):
     dense = next(plain_walls(0.02, 1))
     assert seq.occupancy_grid(dense[:, 0], dense[:, 2], 0.1)[0] == 0.1
     sparse = next(plain_walls(0.25, 1))
-    cell, _, _, first = seq.occupancy_grid(sparse[:, 0], sparse[:, 2], 0.1)
+    cell, kx, kz, _ = seq.occupancy_grid(sparse[:, 0], sparse[:, 2], 0.1)
     assert cell > 0.25
-    assert len(sparse) >= seq.CELL_MIN_POINTS * len(first)
+    assert np.median(np.unique(kx * (kz.max() + 1) + kz, return_counts=True)[1]) >= seq.CELL_MIN_POINTS
     grown = cuts(plain_walls(0.25))
     monkeypatch.setattr(seq, "CELL_MAX_STEPS", 0)  # the fixed 0.1 m cell
     fixed = cuts(plain_walls(0.25))
     assert grown <= 15, grown
     assert fixed >= 50, fixed
+
+
+def _arcade(rng, bays=10, near=3, spacing=0.3, near_spacing=0.03):
+    """A wall of ``bays`` 5 m bays (a 3 x 4 m opening each), 6 m tall, scanned at
+    ``spacing`` except bay ``near`` (a station beside it): 100 times as many points there."""
+    parts = []
+    for k in range(bays):
+        sp = near_spacing if k == near else spacing
+        n = int(5.0 * 6.0 / sp ** 2)
+        x, z = rng.uniform(5.0 * k, 5.0 * (k + 1), n), rng.uniform(0.0, 6.0, n)
+        solid = (np.abs(x - 5.0 * k - 2.5) > 1.5) | (z > 4.0)
+        parts.append(np.c_[x, rng.normal(0.0, 0.005, n), z][solid])
+    return np.concatenate(parts)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_an_arcade_scanned_beside_one_bay_is_cut_at_every_pier(seed):
+    """A station beside one bay puts most of a facade's points there. S2 still cuts every
+    bay: the occupancy cells grow until the median occupied cell (not the mean, which the
+    close bay sets) holds a few points, and a child is small by its occupied cells, not
+    its points (the far bays hold 1 % of the points each)."""
+    import hollowtree.tree.sequences as seq
+
+    a = _arcade(np.random.default_rng(seed))
+    pr = seq.s2(a)
+    assert pr is not None
+    assert pr.n_children == 10, pr.cuts
+    spans = sorted((a[c, 0].min(), a[c, 0].max()) for c in pr.children)
+    cuts = [(hi + lo) / 2 for (_, hi), (lo, _) in zip(spans[:-1], spans[1:], strict=True)]
+    assert np.allclose(cuts, np.arange(5.0, 50.0, 5.0), atol=1.0), cuts  # in each pier (2 m wide)
 
 
 class _Always:

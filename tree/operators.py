@@ -323,7 +323,6 @@ def v2(
     lo, hi = (float(xs.min()), float(xs.max())) if len(xs) else (0.0, 1.0)
     if hi <= lo:
         hi = lo + 1.0
-    fine_edges = np.linspace(lo, hi, nf + 1)
     b = np.clip(((xs - lo) / (hi - lo) * nf).astype(np.int64), 0, nf - 1)
     if statistic == "count":
         f = np.bincount(b, minlength=nf).astype(np.float64)
@@ -336,6 +335,14 @@ def v2(
         f[empty] = f[~empty].min() if (~empty).any() else 0.0
     else:
         raise ValueError(f"The 'statistic' parameter of v2 must be 'count' or 'max'. Got {statistic!r} instead.")
+    return limited(f, lo, hi, sigma=sigma, bins_per_crossing=bins_per_crossing)
+
+
+def limited(f: FloatArray, lo: float, hi: float, *, sigma: float = 1.0, bins_per_crossing: float = 1.0) -> Histogram:
+    """The limited-bin histogram of a fine signal ``f`` (equal bins from ``lo`` to ``hi``):
+    ``v2``'s second half, for a fine signal made otherwise (:func:`tree.sequences.occupancy_cut`)."""
+    nf = len(f)
+    fine_edges = np.linspace(lo, hi, nf + 1)
     g = gaussian_filter1d(f, sigma, mode="nearest") if sigma > 0 else f
     sg = np.sign(np.diff(g))
     sg = sg[sg != 0]

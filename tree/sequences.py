@@ -40,6 +40,7 @@ from hollowtree.tree.operators import (
     _groups,
     _refine,
     h,
+    limited,
     p,
     peak_bins,
     plateaus,
@@ -50,19 +51,22 @@ from hollowtree.tree.operators import (
     v2,
 )
 
-__all__ = ["GAP_SEQUENCE", "PART_SEQUENCE", "POST_SEQUENCE", "SEQUENCES", "Proposal", "SequenceParams", "gaps", "occupancy_cut", "occupancy_grid", "parts", "propose", "s1",
+__all__ = ["GAP_SEQUENCE", "PART_SEQUENCE", "POST_SEQUENCE", "SEQUENCES", "Proposal", "SequenceParams", "gaps", "occupancy_cut", "occupancy_grid", "occupancy_signal", "parts", "propose", "s1",
            "s2", "s3", "storeys"]
 
 
 #: Sequence ids as stored in the node table (0 = the root, produced by no sequence).
 SEQUENCES: tuple[int, ...] = (1, 2, 3)
 
-#: An occupancy cell of :func:`occupancy_cut` must hold this many points on
-#: average over the occupied cells; a sparser node's cells grow by sqrt(2) until they do
+#: An occupancy cell of :func:`occupancy_cut` must hold this many points (the median
+#: over the occupied cells); a sparser node's cells grow by sqrt(2) until they do
 #: (:func:`occupancy_grid`). With points spread evenly over a surface a cell of the
 #: surface then stays empty with a chance of about exp(-3) = 5 %: an empty cell is an
 #: opening, not the scan's noise.
 CELL_MIN_POINTS = 3.0
+#: The share of occupied cells that hold one point where a surface holds
+#: :data:`CELL_MIN_POINTS` per cell (Poisson): lam exp(-lam) / (1 - exp(-lam)).
+_SINGLE = CELL_MIN_POINTS * np.exp(-CELL_MIN_POINTS) / (1.0 - np.exp(-CELL_MIN_POINTS))
 #: At most this many sqrt(2) steps (a cell of 16 x ``params.cell``).
 CELL_MAX_STEPS = 8
 #: How far (a share of its height) a solid band reaching the top of a node must stand
@@ -100,8 +104,9 @@ class SequenceParams(Params, owner="SequenceParams"):
                                                     "(:func:`~tree.operators.v2`)")
     min_points: int = param(30, ge=0, doc="nodes with fewer points get no proposal")
     min_child_fraction: float = param(
-        0.02, ge=0, lt=1, doc="a child holding less than this share of the node's points is merged into its "
-                              "neighbour across the weaker cut (a peak in a sparse stretch is not a boundary)")
+        0.02, ge=0, lt=1, doc="a child holding less than this share of the node's points (S1) or of its occupied "
+                              "cells (S2, S3, storeys: :func:`occupancy_signal`) is merged into its neighbour across "
+                              "the weaker cut (a peak in a sparse stretch is not a boundary)")
     residual_threshold: float | None = param(
         None, gt=0, doc="circle/n-gon RANSAC inlier distance; None = 1 % of the footprint")
     curve_min_inliers: float = param(
@@ -171,12 +176,12 @@ class Proposal:
         return len(self.children)
 
 
-def _merge_small(counts: IntArray, min_count: int) -> IntArray:
+def _merge_small(counts: npt.ArrayLike, min_count: float) -> IntArray:
     """Cuts kept (indices into the sorted cuts) once every child holds at least
     ``min_count`` points: the smallest child first, merged with its smaller neighbour.
     ``counts`` are the children's point counts between the cuts (one more than cuts);
     dropping a cut adds up its two children, so the points are counted once."""
-    counts = np.asarray(counts, dtype=np.int64).copy()
+    counts = np.asarray(counts, dtype=np.float64).copy()
     kept = np.arange(len(counts) - 1)
     while len(kept):
         k = int(np.argmin(counts))
@@ -212,13 +217,21 @@ def _merge_short_ends(lo: float, hi: float, cuts: FloatArray) -> IntArray:
 
 
 def _finish(seq: int, x: FloatArray, cuts: FloatArray, params: SequenceParams,
-            curve: TransportCurve | None) -> Proposal | None:
+            curve: TransportCurve | None, area: tuple[FloatArray, float, float] | None = None) -> Proposal | None:
     """Merge small children and short end children, then split: the points are labelled
-    once (one ``searchsorted``) and the merges work on the children's counts."""
+    once (one ``searchsorted``) and the merges work on the children's counts, of points,
+    or with ``area`` (:func:`occupancy_signal`) of occupied cells."""
     cuts = np.sort(np.asarray(cuts, dtype=np.float64))
     lab = np.searchsorted(cuts, x, side="right")
-    counts = np.bincount(lab, minlength=len(cuts) + 1)
-    kept = _merge_small(counts, max(1, int(np.ceil(params.min_child_fraction * len(x)))))
+    if area is None:
+        counts = np.bincount(lab, minlength=len(cuts) + 1).astype(np.float64)
+        least = max(1.0, float(np.ceil(params.min_child_fraction * len(x))))
+    else:  # occupied cells: a bay far from every station is as big as one beside a station
+        f, lo, hi = area
+        at = lo + (np.arange(len(f)) + 0.5) * ((hi - lo) / len(f))
+        counts = np.bincount(np.searchsorted(cuts, at, side="right"), weights=f, minlength=len(cuts) + 1)
+        least = params.min_child_fraction * float(f.sum())
+    kept = _merge_small(counts, least)
     if len(kept) and len(x):
         kept = kept[_merge_short_ends(float(x.min()), float(x.max()), cuts[kept])]
     keep = np.zeros(len(cuts), dtype=bool)
@@ -283,18 +296,19 @@ def s2(xyz: npt.ArrayLike, *, params: SequenceParams | None = None) -> Proposal 
 
     Examples
     --------
-    >>> t = np.r_[np.linspace(0, 1, 30), np.full(40, 1.5), np.linspace(2, 3, 30)]
-    >>> xyz = np.column_stack([t, np.zeros(100), np.linspace(0, 1, 100)])
-    >>> prop = s2(xyz)
-    >>> prop.n_children, [len(c) for c in prop.children]
-    (2, [70, 30])
+    >>> t, z = np.meshgrid(np.arange(0, 8, 0.05), np.arange(0, 3, 0.05))
+    >>> bays = (np.abs(t % 4.0 - 2.0) > 1.0) | (z > 2.0)  # two 4 m bays, a 2 m pier between
+    >>> prop = s2(np.column_stack([t[bays], np.zeros(bays.sum()), z[bays]]))
+    >>> prop.n_children, abs(float(prop.cuts[0])) < 0.1  # cut at the pier's middle (t = 0 there)
+    (2, True)
     """
     a = _as_xyz(xyz)
     params = params or SequenceParams()
     if len(a) < params.min_points:
         return None
     tz = h(a)
-    return _finish(2, tz[:, 0], occupancy_cut(tz[:, 0], tz[:, 1], params), params, None)
+    sig = _signal(tz[:, 0], tz[:, 1], params)
+    return _finish(2, tz[:, 0], occupancy_cut(tz[:, 0], tz[:, 1], params, signal=sig), params, None, sig)
 
 
 def s3(xyz: npt.ArrayLike, *, params: SequenceParams | None = None, rng: RngLike = None,
@@ -314,7 +328,8 @@ def s3(xyz: npt.ArrayLike, *, params: SequenceParams | None = None, rng: RngLike
     if curve is None:
         return None
     sz = u(a, curve)
-    return _finish(3, sz[:, 0], occupancy_cut(sz[:, 0], sz[:, 1], params), params, curve)
+    sig = _signal(sz[:, 0], sz[:, 1], params)
+    return _finish(3, sz[:, 0], occupancy_cut(sz[:, 0], sz[:, 1], params, signal=sig), params, curve, sig)
 
 
 def storeys(xyz: npt.ArrayLike, *, params: SequenceParams | None = None,
@@ -343,11 +358,12 @@ def storeys(xyz: npt.ArrayLike, *, params: SequenceParams | None = None,
         return None
     pz = u(a, curve) if curve is not None else h(a)
     seq = 3 if curve is not None else 2
-    cuts, bands = occupancy_cut(pz[:, 1], pz[:, 0], params, open_high=True, bands=True)
-    prop = _finish(seq, pz[:, 1], cuts, params, curve)
+    sig = _signal(pz[:, 1], pz[:, 0], params)
+    cuts, bands = occupancy_cut(pz[:, 1], pz[:, 0], params, open_high=True, bands=True, signal=sig)
+    prop = _finish(seq, pz[:, 1], cuts, params, curve, sig)
     if prop is None or not params.bands or not len(bands):
         return prop
-    banded = _finish(seq, pz[:, 1], np.unique(bands), params, curve)
+    banded = _finish(seq, pz[:, 1], np.unique(bands), params, curve, sig)
     if banded is None or banded.n_children <= prop.n_children:
         return prop
     # A child between the two ends of one band is that band.
@@ -375,9 +391,11 @@ def occupancy_grid(x: FloatArray, y: FloatArray, cell: float) -> tuple[float, In
     edge used, each point's cell column and row, and one point index per occupied cell.
 
     The cell is ``cell``, grown by sqrt(2) (at most :data:`CELL_MAX_STEPS` times) until
-    the occupied cells hold :data:`CELL_MIN_POINTS` points on average: a fixed cell
-    follows the scan's density where it is thinner than the cell (a far facade at 0.3 m
-    spacing in 0.1 m cells is a scatter of single points whose occupancy is noise).
+    the median occupied cell holds :data:`CELL_MIN_POINTS` points: a fixed cell follows
+    the scan's density where it is thinner than the cell (a far facade at 0.3 m spacing
+    in 0.1 m cells is a scatter of single points whose occupancy is noise). The median,
+    not the mean: a node scanned from a station close to one of its parts has most of
+    its points there, and their mean would keep the cells too fine for the rest.
 
     Examples
     --------
@@ -392,14 +410,20 @@ def occupancy_grid(x: FloatArray, y: FloatArray, cell: float) -> tuple[float, In
         c = cell * 2.0 ** (0.5 * step)
         kx = ((x - x0) * (1.0 / c)).astype(np.int64)
         ky = ((y - y0) * (1.0 / c)).astype(np.int64)
-        _, first = np.unique(kx * (int(ky.max()) + 1) + ky, return_index=True)
-        if len(x) >= CELL_MIN_POINTS * len(first):
+        _, first, counts = np.unique(kx * (int(ky.max()) + 1) + ky, return_index=True, return_counts=True)
+        if np.count_nonzero(counts == 1) <= _SINGLE * len(counts):
             break
     return c, kx, ky, first
 
 
+def _signal(x: FloatArray, y: FloatArray, params: SequenceParams) -> tuple[FloatArray, float, float] | None:
+    """:func:`occupancy_signal`, or None where ``params.cell`` is 0 or there are no points."""
+    return occupancy_signal(x, y, params.cell) if params.cell > 0 and len(x) else None
+
+
 def occupancy_cut(x: FloatArray, y: FloatArray, params: SequenceParams, *,
-                  open_high: bool = False, bands: bool = False) -> FloatArray | tuple[FloatArray, FloatArray]:
+                  open_high: bool = False, bands: bool = False,
+                  signal: tuple[FloatArray, float, float] | None = None) -> FloatArray | tuple[FloatArray, FloatArray]:
     """Cuts along ``x`` at the peaks of the wall's occupancy: how many cells of
     ``params.cell`` x ``params.cell`` (grown where the node is sparse: :func:`occupancy_grid`)
     in the ``(x, y)`` projection hold a point, per position along ``x``.
@@ -408,8 +432,10 @@ def occupancy_cut(x: FloatArray, y: FloatArray, params: SequenceParams, *,
     on a wall scanned from a few stations its peaks are the stations, not the piers.
     The occupancy counts each cell once: a pier (solid over the wall's height) is a
     peak and an opening a valley wherever the points are at least a cell apart, and a
-    plain wall has no peaks at all. The fine histogram has one bin per cell (16 to
-    1024 bins); ``v2`` and ``rho`` do the rest. ``params.cell`` 0 counts points.
+    plain wall has no peaks at all. The fine histogram (:func:`occupancy_signal`, or
+    ``signal`` when the caller has it) has one bin per cell (16 to 1024 bins);
+    ``limited`` (``v2``'s limited bins) and ``rho`` do the rest. ``params.cell`` 0 counts
+    points.
 
     ``open_high`` (the storeys): the signal is also read as empty past the high end of
     ``x``, so a solid band that reaches it (the wall over a row of arches, up to the
@@ -429,10 +455,31 @@ def occupancy_cut(x: FloatArray, y: FloatArray, params: SequenceParams, *,
     if params.cell <= 0:
         hist = v2(x, statistic="count", **kw)  # type: ignore[arg-type]
         return _cuts(hist, params.prominence, open_high, bands)
-    cell, kx, _, first = occupancy_grid(x, y, params.cell)
-    n_fine = int(np.clip(np.ceil((float(x.max()) - float(x.min())) / cell), 16, 1024))
-    hist = v2(x[first], statistic="count", n_fine=n_fine, **kw)  # type: ignore[arg-type]
+    f, lo, hi = signal if signal is not None else occupancy_signal(x, y, params.cell)
+    hist = limited(f, lo, hi, **kw)  # type: ignore[arg-type]
     return _cuts(hist, params.prominence, open_high, bands)
+
+
+def occupancy_signal(x: FloatArray, y: FloatArray, cell: float) -> tuple[FloatArray, float, float]:
+    """The occupied cells of the ``(x, y)`` projection (:func:`occupancy_grid`) per fine
+    bin along ``x``, one bin per cell (16 to 1024 bins): ``(signal, lo, hi)``, the fine
+    signal of :func:`occupancy_cut` and the sizes of the children in :func:`_finish`.
+
+    Examples
+    --------
+    >>> t, z = np.meshgrid(np.arange(0, 10, 0.02), np.arange(0, 3, 0.02))
+    >>> f, lo, hi = occupancy_signal(t.ravel(), z.ravel(), 0.1)
+    >>> len(f), float(f.min()), float(f.max())  # 100 columns of 30 cells
+    (100, 30.0, 30.0)
+    """
+    c, kx, _, first = occupancy_grid(x, y, cell)
+    xs = x[first]
+    lo, hi = float(xs.min()), float(xs.max())
+    if hi <= lo:
+        hi = lo + 1.0
+    nf = int(np.clip(np.ceil((float(x.max()) - float(x.min())) / c), 16, 1024))
+    b = np.clip(((xs - lo) / (hi - lo) * nf).astype(np.int64), 0, nf - 1)
+    return np.bincount(b, minlength=nf).astype(np.float64), lo, hi
 
 
 def _cuts(hist: Histogram, prominence: float, open_high: bool,
