@@ -66,9 +66,9 @@ def test_a_file_with_no_point_is_refused_in_one_line(tmp_path):
 
 
 @seed(43)
-@settings(max_examples=12, database=None, phases=[Phase.explicit, Phase.generate], deadline=None,
+@settings(max_examples=10, database=None, phases=[Phase.explicit, Phase.generate], deadline=None,
           suppress_health_check=list(HealthCheck))
-@given(spec=fuzz_specs(max_points=60_000))
+@given(spec=fuzz_specs(max_points=40_000))
 @example(spec=FuzzSpec(kind="scene", seed=11, n_points=30_000, extent=40.0, tiles_across=6,
                        parts=("terrain", "wall_run", "arcade", "chattri", "minaret", "clutter")))
 def test_random_scans_run_to_the_end(spec, tmp_path_factory):

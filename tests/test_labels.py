@@ -252,10 +252,17 @@ def test_arcade_cells_reach_labels(tmp_path, scan, shallow, monkeypatch):
     off = np.asarray(plain_store.attrs["coords"]["offset"])
     xyz = np.column_stack([las.x, las.y, las.z]) - off
     wall = np.flatnonzero(plain["class"] == int(ClassId.WALL))
-    p = xyz[wall[len(wall) // 2]]
     h = 3.0005  # off the scan's 1 mm grid: no point on a cell face, where rounding could put it either side
-    cells = tr.ArcadeCells(np.array([[p[0], p[1], 0.6, 0.8]]), np.array([[-h, h, -h, h, p[2] - h, p[2] + h]]),
-                           np.array([10_000]), np.array([True]), np.array([False]))
+
+    def cell_at(p):
+        return tr.ArcadeCells(np.array([[p[0], p[1], 0.6, 0.8]]), np.array([[-h, h, -h, h, p[2] - h, p[2] + h]]),
+                              np.array([10_000]), np.array([True]), np.array([False]))
+
+    def moved(c):
+        return int((tr.apply_cells(xyz, plain["class"], plain["instance"], c)[1] != plain["instance"]).sum())
+
+    # The cell around the wall point (of 16 along the wall) whose cell takes the most points.
+    cells = max((cell_at(xyz[w]) for w in wall[np.linspace(0, len(wall) - 1, 16).astype(int)]), key=moved)
     monkeypatch.setattr(tr, "arcade_cells", lambda samples, next_id, domes=None: (cells, {}))
     store, got = _run(tmp_path / "cells", scan, tree=SHALLOW)
     np.testing.assert_array_equal(tr.ArcadeCells.from_array(store.read_slice(ROWS)).instance, [10_000])
