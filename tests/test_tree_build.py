@@ -284,9 +284,9 @@ def _arcade(rng, bays=10, near=3, spacing=0.3, near_spacing=0.03):
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_an_arcade_scanned_beside_one_bay_is_cut_at_every_pier(seed):
     """A station beside one bay puts most of a facade's points there. S2 still cuts every
-    bay: the occupancy cells grow until the median occupied cell (not the mean, which the
-    close bay sets) holds a few points, and a child is small by its occupied cells, not
-    its points (the far bays hold 1 % of the points each)."""
+    bay: the occupancy cells grow until few occupied cells hold a single point (not until
+    their mean, which the close bay sets, is 3), and a child is small by its occupied
+    cells, not its points (the far bays hold 1 % of the points each)."""
     import hollowtree.tree.sequences as seq
 
     a = _arcade(np.random.default_rng(seed))

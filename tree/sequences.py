@@ -58,9 +58,9 @@ __all__ = ["GAP_SEQUENCE", "PART_SEQUENCE", "POST_SEQUENCE", "SEQUENCES", "Propo
 #: Sequence ids as stored in the node table (0 = the root, produced by no sequence).
 SEQUENCES: tuple[int, ...] = (1, 2, 3)
 
-#: An occupancy cell of :func:`occupancy_cut` must hold this many points (the median
-#: over the occupied cells); a sparser node's cells grow by sqrt(2) until they do
-#: (:func:`occupancy_grid`). With points spread evenly over a surface a cell of the
+#: An occupancy cell of :func:`occupancy_cut` must hold about this many points of a
+#: surface; a sparser node's cells grow by sqrt(2) until they do (:func:`occupancy_grid`,
+#: read through :data:`_SINGLE`). With points spread evenly over a surface a cell of the
 #: surface then stays empty with a chance of about exp(-3) = 5 %: an empty cell is an
 #: opening, not the scan's noise.
 CELL_MIN_POINTS = 3.0
@@ -178,9 +178,9 @@ class Proposal:
 
 def _merge_small(counts: npt.ArrayLike, min_count: float) -> IntArray:
     """Cuts kept (indices into the sorted cuts) once every child holds at least
-    ``min_count`` points: the smallest child first, merged with its smaller neighbour.
-    ``counts`` are the children's point counts between the cuts (one more than cuts);
-    dropping a cut adds up its two children, so the points are counted once."""
+    ``min_count``: the smallest child first, merged with its smaller neighbour.
+    ``counts`` are the children's sizes between the cuts (points or occupied cells; one
+    more than cuts); dropping a cut adds up its two children, so nothing is counted twice."""
     counts = np.asarray(counts, dtype=np.float64).copy()
     kept = np.arange(len(counts) - 1)
     while len(kept):
@@ -391,11 +391,12 @@ def occupancy_grid(x: FloatArray, y: FloatArray, cell: float) -> tuple[float, In
     edge used, each point's cell column and row, and one point index per occupied cell.
 
     The cell is ``cell``, grown by sqrt(2) (at most :data:`CELL_MAX_STEPS` times) until
-    the median occupied cell holds :data:`CELL_MIN_POINTS` points: a fixed cell follows
+    no more of the occupied cells hold a single point than where a surface holds
+    :data:`CELL_MIN_POINTS` points a cell (:data:`_SINGLE`, 15.7 %): a fixed cell follows
     the scan's density where it is thinner than the cell (a far facade at 0.3 m spacing
-    in 0.1 m cells is a scatter of single points whose occupancy is noise). The median,
-    not the mean: a node scanned from a station close to one of its parts has most of
-    its points there, and their mean would keep the cells too fine for the rest.
+    in 0.1 m cells is a scatter of single points whose occupancy is noise). Not the mean
+    count: a node scanned from a station close to one of its parts has most of its
+    points there, and their mean would keep the cells too fine for the rest.
 
     Examples
     --------
@@ -472,7 +473,7 @@ def occupancy_signal(x: FloatArray, y: FloatArray, cell: float) -> tuple[FloatAr
     >>> len(f), float(f.min()), float(f.max())  # 100 columns of 30 cells
     (100, 30.0, 30.0)
     """
-    c, kx, _, first = occupancy_grid(x, y, cell)
+    c, _, _, first = occupancy_grid(x, y, cell)
     xs = x[first]
     lo, hi = float(xs.min()), float(xs.max())
     if hi <= lo:
