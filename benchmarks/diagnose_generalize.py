@@ -81,12 +81,17 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("paths", nargs="*", type=Path, help="a bench_generalize --work folder or stores")
     ap.add_argument("--flips", nargs=2, type=Path, metavar=("A.json", "B.json"),
-                    help="compare two --json outputs of the same scans: elements found in one only")
+                    help="compare two --json outputs of this script on the same scans: elements found "
+                         "in one only")
     ap.add_argument("--tiny", type=int, default=100, help="elements under this many points are 'tiny'")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
     if args.flips:
-        a, b = (json.loads(p.read_text())["lost"] for p in args.flips)
+        runs = [json.loads(p.read_text()) for p in args.flips]
+        for p, r in zip(args.flips, runs, strict=True):
+            if not isinstance(r, dict) or "lost" not in r:
+                ap.error(f"--flips {p}: not a --json output of diagnose_generalize.py (no 'lost' list)")
+        a, b = (r["lost"] for r in runs)
         pairs = flips(a, b)
         found = [sum(r["bucket"] == "found" for r in x) for x in (a, b)]
         print(f"elements {len(a)}; found {found[0]} and {found[1]}; found in one run only {len(pairs)} "

@@ -32,12 +32,12 @@ RESULTS = REPO / "benchmarks" / "results"
 #: The latest run of each kind of element-recall result (``bench_generalize.py --json``).
 #: These are the figures of docs/generalize.md; edit the file names when a newer run replaces one.
 LATEST = {
-    "test": "generalize-test-tree-v28.json",
+    "test": "generalize-test-tree-v29.json",
     "test-5m": "generalize-test-5m-tree-v25.json",
-    "val-4m": "generalize-val-4m-tree-v28.json",
+    "val-4m": "generalize-val-4m-tree-v29.json",
     "val-1m": "generalize-val-density-1m-tree-v25.json",
     "val-10m": "generalize-val-density-10m-tree-v25.json",
-    "val": "generalize-val-tree-v28.json",
+    "val": "generalize-val-tree-v29.json",
     # the latest run with the paper's energy path (other runs pass --no-energy; it runs with
     # tree.verify=false, so tree-v25 and tree-v26 did not change it)
     "test-energy": "generalize-test-coarse-v7.json",
@@ -46,34 +46,35 @@ LATEST = {
 #: What each validation variant of docs/decisions/method.md was (``generalize-val-4m*.json``).
 VAL_VARIANTS = {
     "generalize-val-4m.json": "`tree-v16` (the baseline)",
-    "generalize-val-4m-tree-v17.json": "`tree-v17`: groups called dome or pillar give up their pillar segments",
+    "generalize-val-4m-tree-v17.json": "`tree-v17`: dome or pillar groups give up pillar segments",
     "generalize-val-4m-posts-from-clutter.json": "posts from roots called dome, pillar or other",
     "generalize-val-4m-posts-and-peel.json": "`tree-v17`'s rule kept beside the posts",
     "generalize-val-4m-tree-v18.json": "`tree-v18`: roots called dome or pillar give up their posts",
     "generalize-val-4m-tree-v19.json": "`tree-v19`: posts from the slice that gives the most",
-    "generalize-val-4m-tree-v20.json": "`tree-v20`: the rest of a posts split cut into its parts",
+    "generalize-val-4m-tree-v20.json": "`tree-v20`: a posts split's rest cut up",
     "generalize-val-4m-posts-from-domes.json": "rejected: posts from roots called dome only",
     "generalize-val-4m-three-posts.json": "rejected: at least three posts called pillar",
-    "generalize-val-4m-hn-p28.json": "rejected: HollowNet trained with 28 procedural sites",
+    "generalize-val-4m-hn-p28.json": "rejected: HollowNet with 28 procedural sites",
     "generalize-val-4m-no-other-max-base.json": "rejected: without `tree.other_max_base`",
-    "generalize-val-4m-tree-v21.json": "`tree-v21`: a minaret node's storeys cut judged by its bays",
-    "generalize-val-4m-forts-tree-v20.json": "`tree-v20`, forts with bastions along their walls",
-    "generalize-val-4m-forts-tree-v21.json": "`tree-v21`, forts with bastions along their walls",
+    "generalize-val-4m-tree-v21.json": "`tree-v21`: minaret storeys judged by bays",
+    "generalize-val-4m-forts-tree-v20.json": "`tree-v20`, forts with wall bastions",
+    "generalize-val-4m-forts-tree-v21.json": "`tree-v21`, forts with wall bastions",
     "generalize-val-4m-check30.json": "`tree-v22`'s check of 30 training sites, 0.2",
     "generalize-val-4m-split-proc.json": "rejected: split model of 140 training scans, 0.35",
     "generalize-val-4m-split-proc-t05.json": "rejected: the same, 0.5",
     "generalize-val-4m-split-both.json": "rejected: the same + 52 random scenes, 0.4",
     "generalize-val-4m-tree-v23.json": "`tree-v23`: instance samples per group, not per batch",
-    "generalize-val-4m-tree-v24.json": "`tree-v24`: occupancy cells grown where sparse, the gaps' fixed",
+    "generalize-val-4m-tree-v24.json": "`tree-v24`: cells grown where sparse",
     "generalize-val-4m-tree-v24-depth4.json": "`tree-v24`, deeper",
     "generalize-val-4m-free-min-50.json": "rejected: free segments from 50 points",
-    "generalize-val-4m-coarse-v7.json": "`coarse-v7`: small free clusters over 50 cells are segments",
-    "generalize-val-4m-tree-v25.json": "`tree-v25`: the element check on by default, threshold 0.1",
+    "generalize-val-4m-coarse-v7.json": "`coarse-v7`: small free clusters are segments",
+    "generalize-val-4m-tree-v25.json": "`tree-v25`: the element check on, 0.1",
     "generalize-val-4m-tree-v26.json": "`tree-v26`: the check's pillar threshold 0.4",
     "generalize-val-4m-grid-v2.json": "`grid-v2`: the fewest tiles, centred on the scan",
-    "generalize-val-4m-tree-v27.json": "`tree-v27`: no transport curve under 15 % of the footprint",
+    "generalize-val-4m-tree-v27.json": "`tree-v27`: no curve under 15 % of the footprint",
     "generalize-val-4m-median-cells.json": "rejected: median of 3 points a cell, children by cells",
     "generalize-val-4m-tree-v28.json": "`tree-v28`: 15.7 % single-point cells, children by cells",
+    "generalize-val-4m-tree-v29.json": "`tree-v29`: `psi` refitted on cells where it fails",
 }
 
 ELEMENTS = ("arch", "dome", "minaret", "pillar")

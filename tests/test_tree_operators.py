@@ -228,6 +228,26 @@ def test_a_colonnade_under_a_slab_has_no_transport_curve_whatever_the_seed():
     assert psi(tower[:, :2], rng=0).inlier_fraction > 0.9
 
 
+def test_a_curved_wall_with_one_crowded_bay_keeps_its_curve():
+    """A station beside one bay of a 20 m arc puts 70x the points there, 1 m deep: the points'
+    best circle is that bay's own short arc, which reads straight. Refitted on the occupied
+    cells, the wall's circle comes back, its inlier share still counted on the points."""
+    hits = {False: 0, True: 0}
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        wall = _ring(rng, radius=20.0, n=3000, noise=0.03, arc=(0.0, math.pi / 2))
+        t = rng.uniform(math.pi / 4 - 0.075, math.pi / 4 + 0.075, 20_000)
+        r = 20.0 - rng.uniform(0.0, 1.0, 20_000)
+        xy = np.vstack([wall, np.column_stack([r * np.cos(t), r * np.sin(t)])])
+        for refit in (False, True):
+            c = psi(xy, refit_cells=refit, rng=seed)
+            hits[refit] += bool(c) and abs(c.radius - 20.0) < 1.0
+            if refit and c:
+                thr = 0.01 * float(np.hypot(*np.ptp(xy, axis=0)))  # psi's default
+                assert c.inlier_fraction == pytest.approx(np.mean(c.residuals(xy) < thr), abs=0.05)
+    assert hits[False] <= 2 < 10 <= hits[True], hits
+
+
 def _facade(solid, *, top: float, step: float = 0.05) -> np.ndarray:
     """Points on a grid of a vertical facade in the x-z plane where ``solid(t, z)``."""
     t, z = np.meshgrid(np.arange(0, 20, step), np.arange(0, top, step))

@@ -20,7 +20,7 @@ The sequences ``S1``, ``S2`` and ``S3`` that chain them are in :mod:`tree.sequen
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
@@ -130,6 +130,7 @@ def psi(
     residual_threshold: float | None = None,
     max_trials: int = 256,
     straightness: float = 3.0,
+    refit_cells: bool = True,
     rng: RngLike = None,
 ) -> TransportCurve | FailedFit:
     """Transport curve ``psi`` of a footprint: circle RANSAC, then n-gon RANSAC.
@@ -144,6 +145,12 @@ def psi(
     every polygon and the straightness test, so their inlier fractions compare on the
     same points; the threshold and the size come from the whole footprint.
 
+    Where that fit fails and ``refit_cells`` is set, the same fits run again on one point
+    of each occupied ``residual_threshold / 2`` cell of the footprint: a crowded part (the
+    bay beside a station) can hold the points' best circle on its own short, straight arc,
+    while the cells weigh the whole footprint alike. The curve's inlier share and RMS are
+    still those of the points' sample, so a threshold on the share keeps its meaning.
+
     Parameters
     ----------
     xy : array-like of shape (n_points, 2)
@@ -153,6 +160,8 @@ def psi(
         As :func:`fit_circle`.
     straightness : float
         See above.
+    refit_cells : bool
+        Fit again on the occupied cells when the points' fit fails (see above).
 
     Returns
     -------
@@ -174,13 +183,24 @@ def psi(
     size = float(np.hypot(*_span(pts)[:2]))
     thr = float(residual_threshold) if residual_threshold is not None else max(0.02, 0.01 * size)
     fit = _subsample(pts, _FIT_SAMPLE, rng)
-    circle = fit_circle(fit, residual_threshold=thr, max_trials=max_trials, rng=rng)
+    curve = _psi_on(fit, fit, thr, size, sides, max_trials, straightness, rng)
+    if isinstance(curve, TransportCurve) or not refit_cells:
+        return curve
+    cells = _subsample(_occupied(pts, 0.5 * thr), _FIT_SAMPLE, rng)
+    again = _psi_on(cells, fit, thr, size, sides, max_trials, straightness, rng)
+    return again if isinstance(again, TransportCurve) else curve
+
+
+def _psi_on(sample: FloatArray, fit: FloatArray, thr: float, size: float, sides: tuple[int, ...],
+            max_trials: int, straightness: float, rng: np.random.Generator) -> TransportCurve | FailedFit:
+    """``psi``'s fits on ``sample``; the curve's inlier share and RMS on ``fit``."""
+    circle = fit_circle(sample, residual_threshold=thr, max_trials=max_trials, rng=rng)
     if not circle:
         return circle
     assert isinstance(circle, TransportCurve)
     if circle.radius > 10.0 * max(size, thr):
         return FailedFit(reason=f"footprint is straight (circle radius {circle.radius:.3g} m)")
-    inl = fit[circle.residuals(fit) < thr]
+    inl = sample[circle.residuals(sample) < thr]
     q = inl - inl.mean(axis=0)
     line_rms = math.sqrt(max(float(np.linalg.eigvalsh(q.T @ q)[0]), 0.0) / len(q))
     if line_rms < straightness * max(circle.rms, 1e-3 * thr):
@@ -188,11 +208,33 @@ def psi(
                                 f"circle RMS {circle.rms:.3g} m)")
     best: TransportCurve = circle
     for n in sides:
-        g = fit_ngon(fit, n_sides=n, start=circle, residual_threshold=thr,
+        g = fit_ngon(sample, n_sides=n, start=circle, residual_threshold=thr,
                      max_trials=max(8, max_trials // 16 - 1), rng=rng)
         if g and isinstance(g, TransportCurve) and g.inlier_fraction > 1.1 * best.inlier_fraction:
             best = g
-    return best
+    if sample is fit:
+        return best
+    res = best.residuals(fit)
+    ok = res < thr
+    return replace(best, inlier_fraction=float(ok.mean()),
+                   rms=float(np.sqrt(np.mean(res[ok] ** 2))) if ok.any() else best.rms)
+
+
+def _occupied(xy: FloatArray, cell: float) -> FloatArray:
+    """One point of each occupied ``cell`` x ``cell`` square of ``xy``, in input order.
+
+    >>> _occupied(np.array([[0.0, 0.0], [0.1, 0.1], [1.2, 0.0], [0.05, 0.9]]), 0.5).tolist()
+    [[0.0, 0.0], [1.2, 0.0], [0.05, 0.9]]
+    """
+    k = ((xy - xy.min(axis=0)) * (1.0 / cell)).astype(np.int64)
+    key = k[:, 0] * (int(k[:, 1].max()) + 1) + k[:, 1]
+    n_cells = int(key.max()) + 1
+    if n_cells > 8 * len(xy):  # a sparse grid: sort rather than a table of every cell
+        _, first = np.unique(key, return_index=True)
+        return xy[np.sort(first)]
+    first = np.full(n_cells, len(xy), dtype=np.int64)
+    np.minimum.at(first, key, np.arange(len(xy)))
+    return xy[np.sort(first[first < len(xy)])]
 
 
 # --------------------------------------------------------------------------- p, u
