@@ -34,6 +34,8 @@ from hollowtree.pipeline.graph import Task, in_child, run_graph
 from hollowtree.pipeline.timing import UNIT_BALANCE, balance, unit_priority
 from hollowtree.primitives.dbscan import spacing_quantile, window_distances
 from hollowtree.primitives.group import (
+    OUTLINE_DIRECTIONS,
+    outline_add,
     segment_contacts_chunked,
 )
 from hollowtree.primitives.normals import estimate_normals
@@ -211,7 +213,8 @@ def _tile_summary(store: RunStore, tile: int, segment: np.ndarray, n_segments: i
                   offset: np.ndarray, params: CoarseParams
                   ) -> tuple[dict[str, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray] | None]:
     """Per segment ``1..n_segments`` of a tile: points, core points, lowest core index and
-    world bounding box; and the contacts between its segments (``group_gap > 0``). Writes
+    world bounding box and outline in plan (``primitives.group.outline_add``, store-local);
+    and the contacts between its segments (``group_gap > 0``). Writes
     the tile's edge rows for the stitch (``coarse/edges/<tile>``, ``EdgeRows``).
 
     The tile's points are read ``READ_ROWS`` rows at a time, so memory follows that
@@ -225,6 +228,8 @@ def _tile_summary(store: RunStore, tile: int, segment: np.ndarray, n_segments: i
     min_index = np.full(m, np.iinfo(np.int64).max, dtype=np.int64)
     lo = np.full((m, 3), np.iinfo(np.int64).max, dtype=np.int64)
     hi = np.full((m, 3), np.iinfo(np.int64).min, dtype=np.int64)
+    out_lo = np.full((m, OUTLINE_DIRECTIONS), np.inf)
+    out_hi = np.full((m, OUTLINE_DIRECTIONS), -np.inf)
     n = len(segment)
     edges = EdgeRows(store, tile)
 
@@ -244,7 +249,9 @@ def _tile_summary(store: RunStore, tile: int, segment: np.ndarray, n_segments: i
                 np.minimum.at(lo[:, j], seg, col)
                 np.maximum.at(hi[:, j], seg, col)
             # The same metres as the segmentation's (_unit_xyz), so the same contacts.
-            yield raw.astype(np.float64) * scale, seg
+            xyz = raw.astype(np.float64) * scale
+            outline_add(out_lo, out_hi, xyz, seg)
+            yield xyz, seg
 
     contacts = None
     if params.group_gap > 0:
@@ -258,7 +265,8 @@ def _tile_summary(store: RunStore, tile: int, segment: np.ndarray, n_segments: i
     table = {"segment": sid, "n_points": n_pts[sid], "n_core": n_core[sid],
              "min_index": np.where(n_core[sid] > 0, min_index[sid], -1),
              "xmin": world_lo[:, 0], "ymin": world_lo[:, 1], "zmin": world_lo[:, 2],
-             "xmax": world_hi[:, 0], "ymax": world_hi[:, 1], "zmax": world_hi[:, 2]}
+             "xmax": world_hi[:, 0], "ymax": world_hi[:, 1], "zmax": world_hi[:, 2],
+             "outline": np.hstack([out_lo[sid], out_hi[sid]]).tolist()}  # store-local metres
     store.write_unit(f"coarse/edges/{tile}", edges.arrays())  # for the stitch
     return table, contacts
 
@@ -294,7 +302,8 @@ def coarse_tile(url: str, tile: int, cfg: dict[str, Any], n_blocks: int = 0, n_p
         "tile": np.full(len(sid), tile, dtype=np.int64), "segment": sid,
         "kind": [fits[i - 1]["kind"] for i in sid.tolist()], "params": [fits[i - 1]["params"] for i in sid.tolist()],
         "rms": [float(fits[i - 1]["rms"]) for i in sid.tolist()],
-        **{k: summary[k] for k in ("n_points", "n_core", "min_index", "xmin", "ymin", "zmin", "xmax", "ymax", "zmax")},
+        **{k: summary[k] for k in ("n_points", "n_core", "min_index", "xmin", "ymin", "zmin", "xmax", "ymax", "zmax",
+                                   "outline")},
     }
     store.write_table(f"coarse/tables/{tile}.parquet", pa.table(rows, schema=_TABLE_SCHEMA))
     n_contacts = 0
@@ -327,6 +336,7 @@ _TABLE_SCHEMA = pa.schema([
     ("rms", pa.float64()), ("n_points", pa.int64()), ("n_core", pa.int64()), ("min_index", pa.int64()),
     ("xmin", pa.float64()), ("ymin", pa.float64()), ("zmin", pa.float64()),
     ("xmax", pa.float64()), ("ymax", pa.float64()), ("zmax", pa.float64()),
+    ("outline", pa.list_(pa.float64())),
 ])
 
 
@@ -372,8 +382,9 @@ FALLBACK_EPS = 0.3
 # coarse-v4: a free segment wider than STRIP_FACTOR x group_max_plane is large;
 # coarse-v6 (v5 named a trial that was dropped): a block whose context holds more than
 # CONTEXT_FACTOR x block_points is cut again (block_inputs); coarse-v7: a small free
-# cluster that spans free_min_cells cells is a segment.
-COARSE_ALGORITHM = "coarse-v7"
+# cluster that spans free_min_cells cells is a segment; coarse-v8: set in a wall by the
+# segment's outline (primitives.group.OUTLINE_DIRECTIONS), not its bounding box.
+COARSE_ALGORITHM = "coarse-v8"
 SPACING_WINDOWS = 1024
 WINDOW_ROWS = 1024
 

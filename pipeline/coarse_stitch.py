@@ -91,6 +91,7 @@ def _element_groups(store: RunStore, tiles: Sequence[int], keys: list[tuple[int,
     kind: dict[int, str] = {}
     plane: dict[int, Any] = {}
     box: dict[int, list[float]] = {}
+    outline: dict[int, np.ndarray] | None = {}  # None: a table made before outlines
     for i, r in enumerate(roots.tolist()):
         row = info[keys[i]]
         if row["n_points"] > big_n.get(r, -1):
@@ -99,6 +100,14 @@ def _element_groups(store: RunStore, tiles: Sequence[int], keys: list[tuple[int,
         b = box.setdefault(r, [np.inf, np.inf, np.inf, -np.inf, -np.inf, -np.inf])
         b[0], b[1], b[2] = min(b[0], row["xmin"]), min(b[1], row["ymin"]), min(b[2], row["zmin"])
         b[3], b[4], b[5] = max(b[3], row["xmax"]), max(b[4], row["ymax"]), max(b[5], row["zmax"])
+        if outline is not None and row.get("outline") is None:
+            outline = None
+        elif outline is not None:
+            o = np.asarray(row["outline"], dtype=np.float64)
+            k = len(o) // 2
+            if r in outline:
+                o = np.r_[np.minimum(outline[r][:k], o[:k]), np.maximum(outline[r][k:], o[k:])]
+            outline[r] = o
     large = np.zeros(n, dtype=bool)
     rs = sorted(box)
     if rs:
@@ -134,7 +143,7 @@ def _element_groups(store: RunStore, tiles: Sequence[int], keys: list[tuple[int,
     wall_of: dict[int, int] = {}
     if params.group_set_in > 0:
         wall_of = set_in_walls(ra, rb, cnt, large, plane, box, np.asarray(store.attrs["coords"]["offset"], np.float64),
-                                params.group_set_in)
+                                params.group_set_in, outline=outline)
     set_in = np.zeros(n, dtype=bool)
     set_in[list(wall_of)] = True
     join = ~large[ra] & ~large[rb] & ~set_in[ra] & ~set_in[rb]

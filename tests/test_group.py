@@ -8,8 +8,10 @@ import pytest
 from hollowtree.errors import ConfigError
 from hollowtree.pipeline.coarse import CoarseParams
 from hollowtree.primitives.group import (
+    OUTLINE_DIRECTIONS,
     box_plane_distance,
     large_segments,
+    outline_add,
     segment_contacts,
     segment_contacts_chunked,
     set_in_plane,
@@ -109,6 +111,33 @@ def test_set_in_plane_takes_jambs_not_neighbours():
     assert set_in_plane(boxes, [0, 1, 0], 0.0, wall, 0.5).tolist() == [False, False, False, False, False]
     with pytest.raises(ConfigError, match="tol"):
         set_in_plane(boxes, [0, 1, 0], 0.0, wall, 0.0)
+
+
+def test_set_in_does_not_turn_with_the_scan():
+    """A jamb 1.4 m deep and an intrados 2 m along a wall's face are set in it whatever the
+    wall's heading: by their outlines, not their boxes, whose corners stand off a turned wall."""
+    rng = np.random.default_rng(3)
+    pieces = [np.c_[rng.uniform(4, 4.3, 3000), rng.uniform(0, 1.4, 3000), rng.uniform(0, 3.5, 3000)],  # jamb
+              np.c_[rng.uniform(4.3, 6.3, 3000), rng.uniform(0, 1.4, 3000), rng.uniform(3.4, 3.6, 3000)],  # intrados
+              np.c_[rng.uniform(10, 14, 3000), rng.uniform(1.0, 5.0, 3000), rng.uniform(0, 0.1, 3000)]]  # floor
+    face = np.c_[rng.uniform(0, 30, 20000), np.zeros(20000), rng.uniform(0, 8, 20000)]
+    box_says = []
+    for deg in (0, 15, 30, 45, 60, 90, 135):
+        t = np.radians(deg)
+        rot = np.array([[np.cos(t), -np.sin(t), 0], [np.sin(t), np.cos(t), 0], [0, 0, 1]])
+        ps = [p @ rot.T for p in pieces]
+        wall = face @ rot.T
+        wall_box = np.r_[wall.min(axis=0), wall.max(axis=0)]
+        normal = rot @ [0.0, 1.0, 0.0]
+        boxes = [np.r_[p.min(axis=0), p.max(axis=0)] for p in ps]
+        lo = np.full((len(ps) + 1, OUTLINE_DIRECTIONS), np.inf)
+        hi = np.full_like(lo, -np.inf)
+        outline_add(lo, hi, np.concatenate(ps)[:, :2], np.repeat(np.arange(1, len(ps) + 1), 3000))
+        outlines = np.hstack([lo[1:], hi[1:]])
+        assert set_in_plane(boxes, normal, 0.0, wall_box, 1.5, outlines=outlines).tolist() == [True, True, False], deg
+        box_says.append(set_in_plane(boxes, normal, 0.0, wall_box, 1.5).tolist())
+    assert box_says[0] == [True, True, False]  # along the axes the box was right
+    assert any(b != [True, True, False] for b in box_says)  # what the outline fixes
 
 
 def test_stacked_pairs_join_stages_not_neighbours():
