@@ -173,6 +173,15 @@ def segment_contacts_chunked(
     return _contacts(q[first], s[first], gap, min_contacts)
 
 
+def _unit_normal(normal: npt.ArrayLike, fn: str) -> tuple[np.ndarray, float]:
+    """``normal`` as a unit vector, and its length; a clear error naming ``fn`` for a zero one."""
+    n = np.asarray(normal, dtype=np.float64).reshape(3)
+    norm = float(np.linalg.norm(n))
+    if not (np.isfinite(norm) and norm > 0):
+        raise ConfigError(f"The 'normal' parameter of {fn} must be a non-zero vector. Got {n.tolist()} instead.")
+    return n / norm, norm
+
+
 def box_plane_distance(boxes: npt.ArrayLike, normal: npt.ArrayLike, d: float) -> npt.NDArray[np.float64]:
     """Largest distance of each axis-aligned box to the plane ``normal . x + d = 0``.
 
@@ -194,12 +203,7 @@ def box_plane_distance(boxes: npt.ArrayLike, normal: npt.ArrayLike, d: float) ->
     [1.0, 2.0]
     """
     b = np.asarray(boxes, dtype=np.float64).reshape(-1, 6)
-    n = np.asarray(normal, dtype=np.float64).reshape(3)
-    norm = float(np.linalg.norm(n))
-    if not (np.isfinite(norm) and norm > 0):
-        raise ConfigError(f"The 'normal' parameter of box_plane_distance must be a non-zero vector. "
-                          f"Got {n.tolist()} instead.")
-    n = n / norm
+    n, norm = _unit_normal(normal, "box_plane_distance")
     c = 0.5 * (b[:, :3] + b[:, 3:])
     h = 0.5 * (b[:, 3:] - b[:, :3])
     return np.abs(c @ n + d / norm) + h @ np.abs(n)
@@ -254,12 +258,8 @@ def outline_plane_distance(outlines: npt.ArrayLike, zlim: npt.ArrayLike, normal:
     o = np.asarray(outlines, dtype=np.float64)
     o = o.reshape(-1, o.shape[-1])
     z = np.asarray(zlim, dtype=np.float64).reshape(-1, 2)
-    n = np.asarray(normal, dtype=np.float64).reshape(3)
-    norm = float(np.linalg.norm(n))
-    if not (np.isfinite(norm) and norm > 0):
-        raise ConfigError(f"The 'normal' parameter of outline_plane_distance must be a non-zero vector. "
-                          f"Got {n.tolist()} instead.")
-    n, d = n / norm, d / norm
+    n, norm = _unit_normal(normal, "outline_plane_distance")
+    d = d / norm
     k = o.shape[1] // 2
     h = np.concatenate([o[:, k:], -o[:, :k]], axis=1)  # support at angles j pi / k, j < 2k
     step = math.pi / k
