@@ -32,12 +32,12 @@ RESULTS = REPO / "benchmarks" / "results"
 #: The latest run of each kind of element-recall result (``bench_generalize.py --json``).
 #: These are the figures of docs/generalize.md; edit the file names when a newer run replaces one.
 LATEST = {
-    "test": "generalize-test-coarse-v8.json",
+    "test": "generalize-test-tree-v30.json",
     "test-5m": "generalize-test-5m-tree-v25.json",
-    "val-4m": "generalize-val-4m-coarse-v8.json",
+    "val-4m": "generalize-val-4m-tree-v30.json",
     "val-1m": "generalize-val-density-1m-tree-v25.json",
     "val-10m": "generalize-val-density-10m-tree-v25.json",
-    "val": "generalize-val-coarse-v8.json",
+    "val": "generalize-val-tree-v30.json",
     # the latest run with the paper's energy path (other runs pass --no-energy; it runs with
     # tree.verify=false, so tree-v25 and tree-v26 did not change it)
     "test-energy": "generalize-test-coarse-v7.json",
@@ -76,6 +76,7 @@ VAL_VARIANTS = {
     "generalize-val-4m-tree-v28.json": "`tree-v28`: 15.7 % single-point cells, children by cells",
     "generalize-val-4m-tree-v29.json": "`tree-v29`: `psi` refitted on cells where it fails",
     "generalize-val-4m-coarse-v8.json": "`coarse-v8`: set in a wall by the outline",
+    "generalize-val-4m-tree-v30.json": "`tree-v30`: the split model refitted",
 }
 
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
