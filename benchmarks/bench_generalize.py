@@ -44,7 +44,7 @@ from hollowtree.classes import ELEMENT_CLASSES, ClassId  # noqa: E402
 from hollowtree.pipeline.coarse import COARSE_ALGORITHM  # noqa: E402
 from hollowtree.pipeline.evaluate import evaluate_inputs  # noqa: E402
 from hollowtree.pipeline.tree_stage import TREE_ALGORITHM  # noqa: E402
-from hollowtree.scenes.procedural import FAMILIES, family_of, scan_draw, split_seeds  # noqa: E402
+from hollowtree.scenes.procedural import FAMILIES, GENERATOR, family_of, scan_draw, split_seeds  # noqa: E402
 from hollowtree.scenes.synth import synth  # noqa: E402
 from hollowtree.tiling.grid import GRID_ALGORITHM  # noqa: E402
 
@@ -102,7 +102,7 @@ def main(argv: list[str] | None = None) -> int:
     scans = []
     for seed in seeds:
         n = _points(seed, *args.points)
-        path = args.work / f"gen-{seed}-{n}.laz"
+        path = args.work / f"{GENERATOR}-{seed}-{n}.laz"
         if not path.exists():
             d = scan_draw(seed)
             res = synth("gen", path, n_points=n, seed=seed, noise=d.noise, registration_error=d.registration_error)
@@ -168,7 +168,7 @@ def main(argv: list[str] | None = None) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"benchmark": "bench_generalize", "split": args.split, "family": args.family,
                                "overrides": args.overrides,
-                               "seeds": seeds, "points": list(args.points), "workflow": "workflows/local.yaml",
+                               "generator": GENERATOR, "seeds": seeds, "points": list(args.points), "workflow": "workflows/local.yaml",
                                "tree_algorithm": TREE_ALGORITHM, "coarse_algorithm": COARSE_ALGORITHM,
                                "grid_algorithm": GRID_ALGORITHM, "totals": total, "families": fam, "visibility": visibility, "sites": sites,
                                "seconds": round(wall, 1)},

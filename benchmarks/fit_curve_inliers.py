@@ -35,7 +35,7 @@ if str(REPO) not in sys.path:
 
 import numpy as np  # noqa: E402
 
-from hollowtree.scenes.procedural import SPLITS, scan_draw  # noqa: E402
+from hollowtree.scenes.procedural import GENERATOR, SPLITS, scan_draw  # noqa: E402
 from hollowtree.scenes.synth import synth  # noqa: E402
 from hollowtree.tiling.readers import PointBlock, read_blocks  # noqa: E402
 from hollowtree.tree.curves import TransportCurve  # noqa: E402
@@ -107,12 +107,12 @@ def main(argv: list[str] | None = None) -> int:
     fits: dict[str, list[list[float]]] = defaultdict(list)
     refit: dict[str, list[list[float]]] = defaultdict(list)
     for seed in _seeds(args.seeds):
-        scan = args.work / f"gen-{seed}.laz"
+        scan = args.work / f"{GENERATOR}-{seed}.laz"
         if not scan.exists():
             d = scan_draw(seed)  # as bench_generalize and `hollowtree synth gen` scan it
             synth("gen", scan, n_points=int(args.points), seed=seed, noise=d.noise,
                   registration_error=d.registration_error)
-        elements = scan.with_name(f"gen-{seed}.elements.parquet")
+        elements = scan.with_name(f"{GENERATOR}-{seed}.elements.parquet")
         for into, cells in ((fits, False), (refit, True)):
             for cls, rows in site_fits(scan, elements, refit_cells=cells).items():
                 into[cls] += rows

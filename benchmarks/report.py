@@ -32,53 +32,25 @@ RESULTS = REPO / "benchmarks" / "results"
 #: The latest run of each kind of element-recall result (``bench_generalize.py --json``).
 #: These are the figures of docs/generalize.md; edit the file names when a newer run replaces one.
 LATEST = {
-    "test": "generalize-test-tree-v30.json",
+    "test": "generalize-test-gen-v2.json",
     "test-5m": "generalize-test-5m-tree-v25.json",
-    "val-4m": "generalize-val-4m-tree-v30.json",
+    "val-4m": "generalize-val-4m-gen-v2.json",
     "val-1m": "generalize-val-density-1m-tree-v25.json",
     "val-10m": "generalize-val-density-10m-tree-v25.json",
-    "val": "generalize-val-tree-v30.json",
+    "val": "generalize-val-gen-v2.json",
     # the latest run with the paper's energy path (other runs pass --no-energy; it runs with
     # tree.verify=false, so tree-v25 and tree-v26 did not change it)
     "test-energy": "generalize-test-coarse-v7.json",
 }
 
-#: What each validation variant of docs/decisions/method.md was (``generalize-val-4m*.json``).
+#: What each validation variant of docs/decisions/method.md was (``generalize-val-4m*.json``;
+#: its 0.5-2 M twin, where there is one, is the same name without ``-4m``).
 VAL_VARIANTS = {
-    "generalize-val-4m.json": "`tree-v16` (the baseline)",
-    "generalize-val-4m-tree-v17.json": "`tree-v17`: dome or pillar groups give up pillar segments",
-    "generalize-val-4m-posts-from-clutter.json": "posts from roots called dome, pillar or other",
-    "generalize-val-4m-posts-and-peel.json": "`tree-v17`'s rule kept beside the posts",
-    "generalize-val-4m-tree-v18.json": "`tree-v18`: roots called dome or pillar give up their posts",
-    "generalize-val-4m-tree-v19.json": "`tree-v19`: posts from the slice that gives the most",
-    "generalize-val-4m-tree-v20.json": "`tree-v20`: a posts split's rest cut up",
-    "generalize-val-4m-posts-from-domes.json": "rejected: posts from roots called dome only",
-    "generalize-val-4m-three-posts.json": "rejected: at least three posts called pillar",
-    "generalize-val-4m-hn-p28.json": "rejected: HollowNet with 28 procedural sites",
-    "generalize-val-4m-no-other-max-base.json": "rejected: without `tree.other_max_base`",
-    "generalize-val-4m-tree-v21.json": "`tree-v21`: minaret storeys judged by bays",
-    "generalize-val-4m-forts-tree-v20.json": "`tree-v20`, forts with wall bastions",
-    "generalize-val-4m-forts-tree-v21.json": "`tree-v21`, forts with wall bastions",
-    "generalize-val-4m-check30.json": "`tree-v22`'s check of 30 training sites, 0.2",
-    "generalize-val-4m-split-proc.json": "rejected: split model of 140 training scans, 0.35",
-    "generalize-val-4m-split-proc-t05.json": "rejected: the same, 0.5",
-    "generalize-val-4m-split-both.json": "rejected: the same + 52 random scenes, 0.4",
-    "generalize-val-4m-tree-v23.json": "`tree-v23`: instance samples per group, not per batch",
-    "generalize-val-4m-tree-v24.json": "`tree-v24`: cells grown where sparse",
-    "generalize-val-4m-tree-v24-depth4.json": "`tree-v24`, deeper",
-    "generalize-val-4m-free-min-50.json": "rejected: free segments from 50 points",
-    "generalize-val-4m-coarse-v7.json": "`coarse-v7`: small free clusters are segments",
-    "generalize-val-4m-tree-v25.json": "`tree-v25`: the element check on, 0.1",
-    "generalize-val-4m-tree-v26.json": "`tree-v26`: the check's pillar threshold 0.4",
-    "generalize-val-4m-grid-v2.json": "`grid-v2`: the fewest tiles, centred on the scan",
-    "generalize-val-4m-tree-v27.json": "`tree-v27`: no curve under 15 % of the footprint",
-    "generalize-val-4m-median-cells.json": "rejected: median of 3 points a cell, children by cells",
-    "generalize-val-4m-tree-v28.json": "`tree-v28`: 15.7 % single-point cells, children by cells",
-    "generalize-val-4m-tree-v29.json": "`tree-v29`: `psi` refitted on cells where it fails",
-    "generalize-val-4m-coarse-v8.json": "`coarse-v8`: set in a wall by the outline",
-    "generalize-val-4m-tree-v30.json": "`tree-v30`: the split model refitted",
+    "generalize-val-4m.json": "`tree-v16` on `gen-v1` (the first baseline)",
+    "generalize-val-4m-tree-v30.json": "`tree-v30` on `gen-v1` (its last; the variants between: CHANGELOG.md)",
+    "generalize-val-4m-gen-v2.json": "`tree-v30` on `gen-v2`: sites turned by a heading",
+    "generalize-val-4m-tree-v31.json": "`tree-v31`: a bay one face thin is a piece",
 }
-
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
 BEGIN = re.compile(r"<!-- generated: ([\w.-]+) -->\n")
 END = "<!-- end generated -->"
@@ -115,9 +87,13 @@ def _points(d: dict) -> str:
 
 
 def _code(d: dict) -> str:
-    """The tree's label a run carried, and the coarse stage's and the grid's where they were
-    recorded (runs before ``grid-v2`` carry no grid label)."""
-    return ", ".join(f"`{d[k]}`" for k in ("tree_algorithm", "coarse_algorithm", "grid_algorithm") if k in d) or "?"
+    """The tree's label a run carried, the coarse stage's and the grid's where they were
+    recorded (runs before ``grid-v2`` carry no grid label), and the procedural sites'
+    generator (``gen-v1`` before it was recorded)."""
+    labels = [d[k] for k in ("tree_algorithm", "coarse_algorithm", "grid_algorithm") if k in d]
+    if d.get("benchmark") == "bench_generalize":
+        labels.append(d.get("generator", "gen-v1"))
+    return ", ".join(f"`{x}`" for x in labels) or "?"
 
 
 def _seeds(d: dict) -> str:
@@ -427,21 +403,27 @@ def derawar() -> str:
 
 # --- docs/decisions/method.md ------------------------------------------------------------
 
+def _f1(d: dict) -> float:
+    fd, gt, m, p = _found(d["totals"]["tree"])
+    r, pr = fd / gt, m / p
+    return 2 * r * pr / (r + pr)
+
+
 def val_history() -> str:
-    """Every validation variant at 4 M points (14 sites): what was tried on the way to the tree
-    (its JSON: :data:`VAL_VARIANTS`)."""
-    out = ["| variant | arch | dome | minaret | pillar | found | precision | F1 |",
-           "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    """Every validation variant at 4 M points (14 sites), and the F1 summed with its 0.5-2 M
+    twin where it has one: what was tried on the way to the tree (:data:`VAL_VARIANTS`)."""
+    out = ["| variant | arch | dome | minaret | pillar | found | precision | F1 | F1 sum |",
+           "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for name, what in VAL_VARIANTS.items():
         d = _load(name)
         t = d["totals"]["tree"]
         fd, gt, m, p = _found(t)
-        r, pr = fd / gt, m / p
-        f1 = 2 * r * pr / (r + pr)
+        twin = RESULTS / name.replace("val-4m", "val")
+        total = f"{_f1(d) + _f1(json.loads(twin.read_text())):.3f}" if twin.is_file() and "val-4m" in name else "NA"
         per = [str(t[c]["found"]) for c in ELEMENTS]
         over = "".join(f" (`{re.sub(r'=/.*/', '=', o)}`)" for o in d.get("overrides", []))
         out.append(f"| {what}{over} | " + " | ".join(per)
-                   + f" | {fd} / {gt} | {100 * pr:.1f} % | {f1:.3f} |")
+                   + f" | {fd} / {gt} | {100 * m / p:.1f} % | {_f1(d):.3f} | {total} |")
     return "\n".join(out)
 
 

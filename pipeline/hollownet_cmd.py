@@ -146,10 +146,11 @@ def procedural_samples(site_seed: int, n_points: int, cache: Path, *, seed: int,
 
     from hollowtree.hollownet.dataset import labelled_samples
     from hollowtree.pipeline.split_fit import check_training_seed, scan_training_site
+    from hollowtree.scenes.procedural import GENERATOR
 
     check_training_seed(site_seed, "HollowNet is trained")
     name = f"gen-{site_seed}-{n_points}.laz"
-    out = cache / "procedural" / f"samples-{site_seed}-{n_points}-s{seed}-v{variants}.npz"
+    out = cache / "procedural" / f"samples-{GENERATOR}-{site_seed}-{n_points}-s{seed}-v{variants}.npz"
     if not out.is_file():
         out.parent.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryDirectory(dir=out.parent) as tmp:

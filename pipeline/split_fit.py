@@ -134,10 +134,11 @@ def procedural_groups(seed: int, work: Path, *, n_points: int = 600_000) -> Path
     ConfigError
         If ``seed`` is not a training seed (``scenes.procedural.SPLITS["train"]``).
     """
+    from hollowtree.scenes.procedural import GENERATOR
     from hollowtree.scenes.synth import sidecar_path
 
     check_training_seed(seed, "the split model is fitted")
-    out = work / f"groups-gen-{seed}-{n_points}.npz"
+    out = work / f"groups-{GENERATOR}-{seed}-{n_points}.npz"
     if out.exists():
         return out
     laz = work / f"gen-{seed}.laz"

@@ -22,7 +22,8 @@ element styles
 proportions, counts, clutter
     every size and count is drawn from a wide range; clutter (trees, people, cars,
     benches, bicycles, scaffolding) is scattered around; stations are random, inside and
-    outside, sometimes all on one side (a partial scan).
+    outside, sometimes all on one side (a partial scan); the whole site is turned by a
+    random heading.
 
 A site is a pure function of ``(seed, family)``. :data:`SPLITS` fixes which seeds are for
 training, validation and test (docs/generalize.md): learned parts and thresholds are
@@ -43,6 +44,7 @@ True
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -67,7 +69,11 @@ from hollowtree.scenes.mesh import TriMesh, concat_meshes
 from hollowtree.scenes.scene import Scene, SceneBuilder
 from hollowtree.scenes.shapes import ArcPath, StraightPath, box
 
-__all__ = ["FAMILIES", "SPLITS", "ScanDraw", "family_of", "procedural_site", "scan_draw", "split_seeds"]
+__all__ = ["FAMILIES", "GENERATOR", "SPLITS", "ScanDraw", "family_of", "procedural_site", "scan_draw", "split_seeds"]
+
+#: The generator's version, in the names of the scans made from it (a changed distribution
+#: makes new scans, never reuses old ones): ``gen-v2`` draws a site heading.
+GENERATOR = "gen-v2"
 
 #: The layout families, in the order :func:`family_of` cycles through them.
 FAMILIES = ("courtyard_mosque", "linear_facade", "fort", "pavilion_garden", "curved_facade", "monument", "ruins")
@@ -470,12 +476,17 @@ _LAYOUTS: dict[str, Callable[[_Site], None]] = {
 }
 
 
-def procedural_site(seed: int, family: str | None = None, *, ruin: float | None = None) -> Scene:
+def procedural_site(seed: int, family: str | None = None, *, ruin: float | None = None,
+                    heading: float | None = None) -> Scene:
     """The site of ``seed``: family ``family`` (default :func:`family_of`), with ground,
-    clutter and 3-10 random stations (a partial scan in about one site in four).
+    clutter and 3-10 random stations (a partial scan in about one site in four), turned
+    about the vertical axis by a random heading: a scan's frame is the scanner's or the
+    survey's, never the building's.
 
     ``ruin`` (``ruins`` only) overrides the drawn share of elements that are missing or
-    broken off (0.2-0.5); 0 builds the same layout intact.
+    broken off (0.2-0.5); 0 builds the same layout intact. ``heading`` (radians) overrides
+    the drawn heading (0-2 pi, its own draw: the same seed makes the same site at any
+    heading); 0 builds the layout along the axes.
     """
     family = family or family_of(seed)
     if family not in FAMILIES:
@@ -484,6 +495,9 @@ def procedural_site(seed: int, family: str | None = None, *, ruin: float | None 
         raise ConfigError(f"ruin must be between 0 and 1; got {ruin}")
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), FAMILIES.index(family)]))
     ruin_rng = np.random.default_rng(np.random.SeedSequence([int(seed), FAMILIES.index(family), 1]))
+    if heading is None:
+        heading = float(np.random.default_rng(np.random.SeedSequence([int(seed), FAMILIES.index(family), 2]))
+                        .uniform(0.0, 2 * np.pi))
     s = _Site(f"gen-{family}-{seed}", rng, ruin_rng=ruin_rng)
     if family == "ruins":
         drawn = float(ruin_rng.uniform(0.2, 0.5))
@@ -510,7 +524,16 @@ def procedural_site(seed: int, family: str | None = None, *, ruin: float | None 
             if not any(a <= x <= b and c <= y <= d for a, b, c, d in s.solid):
                 break
         s.b.add_station((x, y, EYE))
-    return s.b.build()
+    return _turned(s.b.build(), heading)
+
+
+def _turned(scene: Scene, angle: float) -> Scene:
+    """``scene`` turned by ``angle`` radians about the vertical axis through the origin."""
+    if angle == 0.0:
+        return scene
+    c, sn = np.cos(angle), np.sin(angle)
+    rot = np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]])
+    return dataclasses.replace(scene, vertices=scene.vertices @ rot.T, stations=scene.stations @ rot.T)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -87,6 +87,22 @@ def test_ruins_miss_parts_of_their_layout():
         procedural_site(3, "ruins", ruin=1.5)
 
 
+def test_a_site_is_its_layout_turned_by_its_own_heading():
+    """The heading is its own draw: the same site at heading 0 is the layout along the axes,
+    turned rigidly about the vertical axis (stations too); seeds draw different headings."""
+    angles = []
+    for seed in split_seeds("val", 3, family="fort"):
+        turned, along = procedural_site(seed), procedural_site(seed, heading=0.0)
+        np.testing.assert_array_equal(turned.faces, along.faces)
+        np.testing.assert_array_equal(turned.face_instance, along.face_instance)
+        np.testing.assert_allclose(turned.vertices[:, 2], along.vertices[:, 2])
+        for p, q in ((turned.vertices, along.vertices), (turned.stations, along.stations)):
+            np.testing.assert_allclose(np.hypot(p[:, 0], p[:, 1]), np.hypot(q[:, 0], q[:, 1]), atol=1e-9)
+        far = int(np.argmax(np.hypot(*along.vertices[:, :2].T)))
+        angles.append(np.arctan2(*turned.vertices[far, 1::-1]) - np.arctan2(*along.vertices[far, 1::-1]))
+    assert len({round(float(np.mod(a, 2 * np.pi)), 3) for a in angles}) == 3
+
+
 def test_scan_draw_is_seeded_and_in_range():
     assert scan_draw(5) == scan_draw(5)
     assert scan_draw(5) != scan_draw(6)
