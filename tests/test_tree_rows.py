@@ -90,6 +90,24 @@ def test_cells_change_the_points():
     assert i.tolist() == [4, 50, 100, 0, 8, 50, 1, 50, 60]
 
 
+def test_a_bay_that_is_one_face_takes_the_rest_of_its_bay():
+    """A bay found as its front face alone (a pitch wide but 0.15 m of the wall's 1 m deep)
+    is a piece: its cell spans the wall's depth and takes the intrados and back face that
+    were left in the wall. Without the depth test it would be full and take nothing."""
+    rng = np.random.default_rng(5)
+    row = {i + 1: _box(rng, i * PITCH, (i + 1) * PITCH) for i in range(6)}
+    row[3] = _box(rng, 2 * PITCH, 3 * PITCH, y=(0.35, 0.5))
+    cells, absorbed = arcade_cells(_samples(row), 100)
+    assert absorbed == {}
+    assert set(cells.instance[cells.take == 1].tolist()) == {3}
+    k, (t0, t1) = _cell(cells, 3)
+    assert (t0, t1) == (pytest.approx(2 * PITCH, abs=0.1), pytest.approx(3 * PITCH, abs=0.1))
+    xyz = np.array([[2.5 * PITCH, -0.45, 1.0], [2.5 * PITCH, 0.0, 4.0], [1.5 * PITCH, -0.45, 1.0]])
+    c, i = apply_cells(xyz, [WALL, WALL, WALL], [50, 50, 50], cells)
+    assert c.tolist() == [ARCH, ARCH, WALL]
+    assert i.tolist() == [3, 3, 50]
+
+
 def test_the_row_may_run_any_way():
     """The same row turned by 37 degrees and moved gives the same cells in its own frame."""
     rng = np.random.default_rng(2)

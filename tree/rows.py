@@ -77,8 +77,11 @@ ROW_BASE = 0.4
 #: A row is straight when ``ROW_STRAIGHT_SHARE`` of its bays are within ``ROW_STRAIGHT`` m of its line.
 ROW_STRAIGHT = 0.6
 ROW_STRAIGHT_SHARE = 0.8
-#: A bay at least this share of the pitch wide is full.
+#: A bay at least this share of the pitch wide is full, unless it is thin: less deep across
+#: the line than ``DEEP_SHARE`` of the wide bays' median depth (one face of a bay, its
+#: intrados and other face left in the wall).
 FULL_SHARE = 0.85
+DEEP_SHARE = 0.5
 #: Two neighbouring pieces (bays not full) no wider together than this many pitches are one bay.
 PIECES = 1.0
 #: Two bays are neighbours when their mid-points are at most this many pitches apart.
@@ -289,7 +292,12 @@ def arcade_cells(samples: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]], nex
         pitch = float(np.median(np.diff(mids)))
         if pitch <= 0:
             continue
-        full = widths >= FULL_SHARE * pitch
+        depths = np.array([q1 - q0 for _, _, q0, q1 in ext])
+        wide = widths >= FULL_SHARE * pitch
+        if wide.sum() < 2:
+            continue
+        deep = DEEP_SHARE * float(np.median(depths[wide]))
+        full = wide & (depths >= deep)
         if full.sum() < 2:
             continue
         # Pieces of one bay: a piece whose mid-point lies in a full bay is part of it, and
@@ -317,7 +325,7 @@ def arcade_cells(samples: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]], nex
         ext = [e for e, k in zip(ext, keep, strict=True) if k]
         mids = np.array([(lo + hi) / 2 for lo, hi, _, _ in ext])
         widths = np.array([hi - lo for lo, hi, _, _ in ext])
-        full = widths >= FULL_SHARE * pitch
+        full = (widths >= FULL_SHARE * pitch) & (np.array([q1 - q0 for _, _, q0, q1 in ext]) >= deep)
         fb = [k for k in range(len(row)) if full[k]]
         q0 = float(np.median([ext[k][2] for k in fb])) - BAND_PAD
         q1 = float(np.median([ext[k][3] for k in fb])) + BAND_PAD
