@@ -521,6 +521,50 @@ def test_a_storeys_split_is_kept_when_a_storey_splits(monkeypatch):
     assert len(build_tree(xyz, wall, split=_ByProposal(), rng=0).nodes) == 1
 
 
+class _Draws:
+    """A stand-in split model that answers its calls in turn from ``answers``."""
+
+    threshold = 0.5
+
+    def __init__(self, *answers):
+        self.answers = list(answers)
+        self.calls = 0
+
+    def probability(self, features):
+        self.calls += 1
+        return np.full(len(features), self.answers.pop(0))
+
+
+def test_a_close_call_is_judged_by_two_draws(monkeypatch):
+    """A node whose best proposal lies within REDRAW_MARGIN of the threshold is proposed
+    again (a second draw of the fits) and judged by the two draws' mean probability; one
+    farther off is decided by its one draw."""
+    import hollowtree.tree.build as tb
+    from hollowtree.tree.sequences import Proposal
+
+    rng = np.random.default_rng(0)
+    xyz = np.c_[rng.uniform(0, 12, 3000), np.zeros(3000), rng.uniform(0, 5, 3000)]
+
+    def proposals(pts, **kw):
+        if len(pts) < len(xyz):
+            return {1: None, 2: None, 3: None, 4: None}
+        bays = tuple(np.flatnonzero((pts[:, 0] >= a) & (pts[:, 0] < a + 4.0)) for a in (0.0, 4.0, 8.0))
+        return {2: Proposal(sequence=2, children=bays, cuts=np.array([4.0, 8.0]))}
+
+    monkeypatch.setattr(tb, "propose", proposals)
+    wall = _Always(int(ClassId.WALL))
+    kept = _Draws(0.45, 0.65)
+    r = build_tree(xyz, wall, split=kept, rng=0)
+    assert len(r.nodes.children(0)) == 3 and kept.calls == 2
+    assert r.nodes.xi[r.nodes.children(0)].tolist() == pytest.approx([0.55] * 3)
+    rejected = _Draws(0.55, 0.35)
+    assert len(build_tree(xyz, wall, split=rejected, rng=0).nodes) == 1 and rejected.calls == 2
+    far = _Draws(0.35)
+    assert len(build_tree(xyz, wall, split=far, rng=0).nodes) == 1 and far.calls == 1
+    monkeypatch.setattr(tb, "REDRAW_MARGIN", 0.0)
+    assert len(build_tree(xyz, wall, split=_Draws(0.45), rng=0).nodes) == 1
+
+
 def test_the_tree_stage_passes_look_ahead_from_the_workflow(monkeypatch):
     from pathlib import Path
 
