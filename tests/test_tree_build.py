@@ -555,12 +555,15 @@ def test_a_close_call_is_judged_by_two_draws(monkeypatch):
     wall = _Always(int(ClassId.WALL))
     kept = _Draws(0.45, 0.65)
     r = build_tree(xyz, wall, split=kept, rng=0)
-    assert len(r.nodes.children(0)) == 3 and kept.calls == 2
+    assert len(r.nodes.children(0)) == 3
+    assert kept.calls == 2
     assert r.nodes.xi[r.nodes.children(0)].tolist() == pytest.approx([0.55] * 3)
     rejected = _Draws(0.55, 0.35)
-    assert len(build_tree(xyz, wall, split=rejected, rng=0).nodes) == 1 and rejected.calls == 2
+    assert len(build_tree(xyz, wall, split=rejected, rng=0).nodes) == 1
+    assert rejected.calls == 2
     far = _Draws(0.35)
-    assert len(build_tree(xyz, wall, split=far, rng=0).nodes) == 1 and far.calls == 1
+    assert len(build_tree(xyz, wall, split=far, rng=0).nodes) == 1
+    assert far.calls == 1
     monkeypatch.setattr(tb, "REDRAW_MARGIN", 0.0)
     assert len(build_tree(xyz, wall, split=_Draws(0.45), rng=0).nodes) == 1
 
