@@ -116,3 +116,16 @@ def test_an_arch_stacked_with_a_minaret_is_part_of_it():
     # An arch that joined another arch which stands under a minaret: both take its class;
     # a dome in a set without a minaret keeps its own.
     assert merged_classes([1, 2, 3, 4], [A, A, M, D], [0, 1, 1, 1, 4]).tolist() == [0, M, M, M, D]
+
+
+def test_a_shafts_halves_side_by_side_are_one_and_two_towers_are_not():
+    """A round bastion (8 m across) cut in two at a tile's edge: its halves' boxes meet and
+    together are as wide as either, so they are one; two such bastions 0.4 m apart make a
+    footprint twice as wide and stay two, as do halves of one group or of another class."""
+    M = int(ClassId.MINARET)
+    west, east = [0, 0, 0, 4.1, 8, 15], [3.9, 0, 0, 8, 8, 15]
+    other = [8.4, 0, 0, 16.4, 8, 15]
+    assert merge_instances([1, 2, 3], [M] * 3, [1, 2, 3], [west, east, other], 3).tolist() == [0, 1, 1, 3]
+    assert merge_instances([1, 2], [M] * 2, [1, 1], [west, east], 2).tolist() == [0, 1, 2]
+    assert merge_instances([1, 2], [D] * 2, [1, 2], [west, east], 2).tolist() == [0, 1, 2]
+    assert merge_instances([1, 2], [M] * 2, [1, 2], [west, east], 2, shaft_spread=0.9).tolist() == [0, 1, 2]

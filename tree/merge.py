@@ -32,7 +32,8 @@ import numpy.typing as npt
 
 from hollowtree.classes import ClassId
 
-__all__ = ["MERGE_CLASSES", "MERGE_INTO", "MERGE_INTO_OVERLAP", "MERGE_MIN_OVERLAP", "MERGE_PAD", "MERGE_STACKED", "merge_instances",
+__all__ = ["MERGE_CLASSES", "MERGE_INTO", "MERGE_INTO_OVERLAP", "MERGE_MIN_OVERLAP", "MERGE_PAD", "MERGE_SHAFT_SPREAD",
+           "MERGE_STACKED", "merge_instances",
            "merged_classes"]
 
 #: Classes whose instances are merged across element groups.
@@ -56,6 +57,11 @@ MERGE_MIN_OVERLAP = 0.6
 #: lower side with the wall strip beside it, called arch, covers 59 % of the shaft's
 #: footprint on one seed (74 % on another); other arches meeting a minaret's box at most 30 %.
 MERGE_INTO_OVERLAP = 0.5
+#: ``MERGE_STACKED`` pieces side by side (one shaft's halves, cut apart at a tile's edge) are
+#: one when their widened boxes meet and together they are at most this many times as long
+#: in plan (the larger horizontal extent) as the longer of the two: two halves of a round
+#: bastion make one as wide as either; two towers side by side make one twice as wide.
+MERGE_SHAFT_SPREAD = 1.5
 _PAIR_BLOCK = 1 << 21
 
 
@@ -71,7 +77,8 @@ def merge_instances(instance: npt.ArrayLike, class_id: npt.ArrayLike, group: npt
                     pad: float = MERGE_PAD, min_overlap: float = MERGE_MIN_OVERLAP,
                     stacked: tuple[int, ...] = MERGE_STACKED,
                     into: tuple[tuple[int, int], ...] = MERGE_INTO,
-                    into_overlap: float = MERGE_INTO_OVERLAP) -> npt.NDArray[np.uint32]:
+                    into_overlap: float = MERGE_INTO_OVERLAP,
+                    shaft_spread: float = MERGE_SHAFT_SPREAD) -> npt.NDArray[np.uint32]:
     """The map from instance ids ``0..n_instances`` to merged ids (``map[0] == 0``; an
     instance kept alone maps to itself, a merged set to its smallest id).
 
@@ -131,9 +138,11 @@ def merge_instances(instance: npt.ArrayLike, class_id: npt.ArrayLike, group: npt
                                                 - np.maximum(lo[r, None, :2], lo[None, :, :2]), 0, None), wall, 2)
             ok = ((inter >= min_overlap * np.prod(np.minimum(ext[r, None], ext[None]), axis=2))
                   & (common[..., 0] >= min_overlap * np.take_along_axis(span, wall, 2)[..., 0]))
-            if c in stacked:  # one shaft: footprints that overlap, heights that meet
+            if c in stacked:  # one shaft: footprints that overlap, heights that meet, or side by side
                 foot = side[..., 0] * side[..., 1]
                 ok |= ((foot >= min_overlap * np.minimum(area[r, None], area[None])) & (side[..., 2] > 0))
+                longest = np.maximum(ext[r, None, :2].max(axis=2), ext[None, :, :2].max(axis=2))
+                ok |= (side > 0).all(axis=2) & (span.max(axis=2) <= shaft_spread * longest)
             ok &= g[r, None] != g[None]
             a, b = np.nonzero(ok)
             _union(parent, ids[r][a], ids[b])
