@@ -32,7 +32,7 @@ RESULTS = REPO / "benchmarks" / "results"
 #: The latest run of each kind of element-recall result (``bench_generalize.py --json``).
 #: These are the figures of docs/generalize.md; edit the file names when a newer run replaces one.
 LATEST = {
-    "test": "generalize-test-gen-v2.json",
+    "test": "generalize-test-tree-v33.json",
     "test-5m": "generalize-test-5m-tree-v25.json",
     "val-4m": "generalize-val-4m-tree-v33.json",
     "val-1m": "generalize-val-density-1m-tree-v25.json",
@@ -40,7 +40,7 @@ LATEST = {
     "val": "generalize-val-tree-v33.json",
     # the latest run with the paper's energy path (other runs pass --no-energy; it runs with
     # tree.verify=false, so tree-v25 and tree-v26 did not change it)
-    "test-energy": "generalize-test-coarse-v7.json",
+    "test-energy": "generalize-test-energy-tree-v33.json",
 }
 
 #: What each validation variant of docs/decisions/method.md was (``generalize-val-4m*.json``;
@@ -52,6 +52,7 @@ VAL_VARIANTS = {
     "generalize-val-4m-tree-v31.json": "`tree-v31`: a bay one face thin is a piece",
     "generalize-val-4m-tree-v32.json": "`tree-v32`: a close call judged by two draws",
     "generalize-val-4m-tree-v33.json": "`tree-v33`: a shaft's halves side by side",
+    "generalize-val-4m-curved-rows.json": "rejected: arcade rows on circles too",
 }
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
 BEGIN = re.compile(r"<!-- generated: ([\w.-]+) -->\n")
