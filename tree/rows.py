@@ -16,7 +16,9 @@ the merge across groups (tree/merge.py):
    ``ROW_STRAIGHT_SHARE`` of them within ``ROW_STRAIGHT`` of the line (the others leave
    the row). A curved arcade (the Roman facade) is not a row, and nothing changes there.
 2. **Pitch and cells.** The pitch is the median spacing of the bays' mid-points along the
-   line; a bay at least ``FULL_SHARE`` of the pitch wide is *full*. Each bay gets a cell
+   line; a bay at least ``FULL_SHARE`` of the pitch wide is *full*, unless it is under
+   ``DEEP_SHARE`` of the wide bays' median depth across the line (one face of a bay,
+   tree-v31). Each bay gets a cell
    along the line: up to its neighbour's edge where the neighbour is full and it is not
    (a piece's cell reaches the piers), the mid-point between two edges otherwise, its own
    edge where it is full and its neighbour is a piece. The band across the line and the
