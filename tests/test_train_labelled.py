@@ -158,13 +158,13 @@ def test_procedural_samples_are_the_ones_train_from_takes_of_the_same_scan(tmp_p
     """``train --procedural N`` cuts the samples ``--from`` cuts from the same procedural
     scan (cached once), and takes training seeds only."""
     from hollowtree.pipeline.hollownet_cmd import procedural_samples, read_labelled
-    from hollowtree.scenes.procedural import scan_draw
+    from hollowtree.scenes.procedural import GENERATOR, scan_draw
     from hollowtree.scenes.synth import synth
 
     with pytest.raises(ConfigError, match="procedural seed 100000 is not a training seed"):
         procedural_samples(100_000, 50_000, tmp_path, seed=0, variants=1)
     name, tr, te = procedural_samples(3, 60_000, tmp_path, seed=0, variants=1)
-    assert (tmp_path / "procedural" / "samples-3-60000-s0-v1.npz").is_file()
+    assert (tmp_path / "procedural" / f"samples-{GENERATOR}-3-60000-s0-v1.npz").is_file()
     d = scan_draw(3)
     synth("gen", tmp_path / name, n_points=60_000, seed=3, noise=d.noise, registration_error=d.registration_error,
           workers=2)
