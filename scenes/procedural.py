@@ -493,6 +493,8 @@ def procedural_site(seed: int, family: str | None = None, *, ruin: float | None 
         raise ConfigError(f"family {family!r} is not one of {', '.join(FAMILIES)}")
     if ruin is not None and not 0.0 <= ruin <= 1.0:
         raise ConfigError(f"ruin must be between 0 and 1; got {ruin}")
+    if heading is not None and not np.isfinite(heading):
+        raise ConfigError(f"heading must be a finite angle in radians; got {heading}")
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), FAMILIES.index(family)]))
     ruin_rng = np.random.default_rng(np.random.SeedSequence([int(seed), FAMILIES.index(family), 1]))
     if heading is None:

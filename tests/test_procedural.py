@@ -101,6 +101,8 @@ def test_a_site_is_its_layout_turned_by_its_own_heading():
         far = int(np.argmax(np.hypot(*along.vertices[:, :2].T)))
         angles.append(np.arctan2(*turned.vertices[far, 1::-1]) - np.arctan2(*along.vertices[far, 1::-1]))
     assert len({round(float(np.mod(a, 2 * np.pi)), 3) for a in angles}) == 3
+    with pytest.raises(ConfigError, match="heading must be a finite angle"):
+        procedural_site(3, "fort", heading=float("nan"))
 
 
 def test_scan_draw_is_seeded_and_in_range():
