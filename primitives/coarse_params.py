@@ -113,8 +113,8 @@ class CoarseParams(Params, owner="coarse"):
         (each with a margin of context around it, each a task of its own), joined like
         tiles, so that a task's memory follows this bound and not the densest spot of the
         scan (a tile near a scanner station can hold several times the average). 0 =
-        never. Default 2.2 M, a little over the ingest's average tile (``tile_points``,
-        2 M), so that a tile of about the average stays whole (docs/method.md, "Blocks
+        never. Default 1.8 M: a unit's seconds per point vary about 4x with what it
+        holds, and a many-worker run waits for its slowest unit (docs/method.md, "Blocks
         inside a dense tile"). A run lowers it (to an eighth at most) where its tiles
         are uneven, until no task holds much over 3x the median task's points
         (``pipeline.coarse.balanced_block_points``).
@@ -181,7 +181,7 @@ class CoarseParams(Params, owner="coarse"):
     distance_tol: float = param(0.15, ge=0, workflow=False, doc="same primitive: positions within this, metres")
     radius_tol: float = param(0.15, ge=0, workflow=False, doc="same primitive: radii within this, relative")
     block_points: int = param(
-        2_200_000, ge=0, doc="tiles with more points are segmented in blocks of at most this many, each a task; "
+        1_800_000, ge=0, doc="tiles with more points are segmented in blocks of at most this many, each a task; "
                              "0 = never")
     block_margin: float | None = param(
         None, gt=0, doc="context around a block, metres; null = min(ingest buffer, 2 x eps)")
