@@ -35,8 +35,8 @@ LATEST = {
     "test": "generalize-test-tree-v33.json",
     "test-5m": "generalize-test-5m-tree-v25.json",
     "val-4m": "generalize-val-4m-tree-v33.json",
-    "val-1m": "generalize-val-density-1m-tree-v25.json",
-    "val-10m": "generalize-val-density-10m-tree-v25.json",
+    "val-1m": "generalize-val-density-1m-tree-v33.json",
+    "val-10m": "generalize-val-density-10m-tree-v33.json",
     "val": "generalize-val-tree-v33.json",
     # the latest run with the paper's energy path (other runs pass --no-energy; it runs with
     # tree.verify=false, so tree-v25 and tree-v26 did not change it)
