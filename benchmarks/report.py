@@ -33,7 +33,7 @@ RESULTS = REPO / "benchmarks" / "results"
 #: These are the figures of docs/generalize.md; edit the file names when a newer run replaces one.
 LATEST = {
     "test": "generalize-test-tree-v33.json",
-    "test-5m": "generalize-test-5m-tree-v25.json",
+    "test-5m": "generalize-test-5m-tree-v33.json",
     "val-4m": "generalize-val-4m-tree-v33.json",
     "val-1m": "generalize-val-density-1m-tree-v33.json",
     "val-10m": "generalize-val-density-10m-tree-v33.json",
