@@ -721,3 +721,46 @@ def test_a_root_called_dome_gives_up_the_posts_called_pillar():
                             (ClassId.ARCH, ClassId.PILLAR), (ClassId.OTHER, ClassId.PILLAR)):
         r2 = build_tree(xyz, _SlenderPillarElseDome(int(posts_as), int(whole)), rng=0, split=_Never())
         assert len(r2.nodes) == 1
+
+
+def test_a_storeys_band_is_cut_into_bays_before_storeys(monkeypatch):
+    """A band a storeys proposal made is cut into storeys again only where no bay cut
+    reaches the threshold: a curved facade's storey was cut at its arches' springing into
+    two bands that the model scored above its bays; a band no bay cut passes may still hold
+    two storeys."""
+    import hollowtree.tree.build as tb
+    from hollowtree.tree.sequences import Proposal
+
+    rng = np.random.default_rng(0)
+    xyz = np.c_[rng.uniform(0, 12, 4000), np.zeros(4000), rng.uniform(0, 8, 4000)]
+
+    def proposals(pts, **kw):
+        z0, z1 = pts[:, 2].min(), pts[:, 2].max()
+        if z1 - z0 < 3.0:
+            return {1: None, 2: None, 3: None, 4: None}
+        mid = 0.5 * (z0 + z1)
+        bands = (np.flatnonzero(pts[:, 2] < mid), np.flatnonzero(pts[:, 2] >= mid))
+        storeys = Proposal(sequence=2, children=bands, cuts=np.array([mid]))
+        if len(pts) == len(xyz):
+            return {1: None, 2: None, 3: None, 4: storeys}
+        bays = tuple(np.flatnonzero((pts[:, 0] >= a) & (pts[:, 0] < a + 4.0)) for a in (0.0, 4.0, 8.0))
+        return {1: None, 2: Proposal(sequence=2, children=bays, cuts=np.array([4.0, 8.0])), 3: None, 4: storeys}
+
+    class Model:  # the storeys above the bays wherever both are proposed
+        threshold = 0.5
+
+        def probability(self, features):
+            return np.array([0.9]) if len(features) == 1 else np.array([0.6, 0.8])
+
+    monkeypatch.setattr(tb, "propose", proposals)
+    r = build_tree(xyz, _Always(int(ClassId.WALL)), split=Model(), rng=0)
+    bands = r.nodes.children(0)
+    assert len(bands) == 2
+    assert [len(r.nodes.children(b)) for b in bands] == [3, 3]
+
+    class NoBays(Model):  # the bays below the threshold: the band's storeys are kept
+        def probability(self, features):
+            return np.array([0.9]) if len(features) == 1 else np.array([0.3, 0.8])
+
+    r = build_tree(xyz, _Always(int(ClassId.WALL)), split=NoBays(), rng=0)
+    assert [len(r.nodes.children(b)) for b in r.nodes.children(0)] == [2, 2]

@@ -390,6 +390,12 @@ def build_tree(
         scores = split.probability(np.vstack(feats)) if split is not None else [model.xi(c[1]) for c in cand]
         return [(float(x), key, c) for x, (key, _), c in zip(scores, props, cand, strict=True)]
 
+    def _bays_first(node: int, scored: list[tuple[float, int, Any]]) -> list[tuple[float, int, Any]]:
+        # a storeys proposal's band is cut into storeys again only where no bay cut passes
+        if node in banded and any(x >= thr_split for x, k, _ in scored if k in _BAYS):
+            return [t for t in scored if t[1] != _STOREYS]
+        return scored
+
     def _best(scored: list[tuple[float, int, Any]]) -> tuple[float, int, Any]:
         return scored[int(np.argmax([x for x, _, _ in scored]))]  # the first of equal scores, as before
 
@@ -440,6 +446,7 @@ def build_tree(
         if len(np.unique(c_cls)) > 1 and (np.isin(c_cls, PART_CLASSES) & (height >= PART_MIN_HEIGHT)).any():
             _add_children(node, idx, part.children, part.sequence, np.full(5, np.nan), np.nan, c_cls, c_sc, c_pr)
 
+    banded: set[int] = set()  # nodes that are a storeys proposal's bands
     while stack:
         node, idx = stack.pop()
         if depth[node] >= max_depth or len(idx) < max(params.min_points, 2):
@@ -456,15 +463,16 @@ def build_tree(
             _add_children(node, idx, gap.children, gap.sequence, np.full(5, np.nan), np.nan, c_cls, c_sc, c_pr)
             continue
         node_rng = np.random.default_rng(np.random.SeedSequence([base, node]))
-        scored = _scored(pts, depth[node], cls[node], probs[node], node_rng)
+        scored = _bays_first(node, _scored(pts, depth[node], cls[node], probs[node], node_rng))
         if not scored:
             if not _split_posts(node, idx, pts):
                 _split_parts(node, idx, pts)
             continue
         x, key, (pr, e, c_cls, c_sc, c_pr) = _best(scored)
         if split is not None and abs(x - thr_split) < REDRAW_MARGIN:
-            scored = _mean_of_draws(scored, _scored(pts, depth[node], cls[node], probs[node],
-                                              np.random.default_rng(np.random.SeedSequence([base, node, 1]))))
+            scored = _bays_first(node, _mean_of_draws(scored, _scored(
+                pts, depth[node], cls[node], probs[node],
+                np.random.default_rng(np.random.SeedSequence([base, node, 1])))))
             x, key, (pr, e, c_cls, c_sc, c_pr) = _best(scored)
         keep = x >= thr_split
         storey = [t for t in scored if t[1] == _STOREYS]
@@ -493,7 +501,10 @@ def build_tree(
             for j in pr.kept_bands:  # solid across the wall's length: wall, whatever its look
                 c_cls[j] = _WALL
                 c_sc[j] = c_pr[j, _WALL - 1] if c_pr.shape[1] >= _WALL else c_sc[j]
+        first = len(parent)
         _add_children(node, idx, children, pr.sequence, e, x, c_cls, c_sc, c_pr)
+        if key == _STOREYS:
+            banded.update(range(first, len(parent)))
     m = len(parent)
     nodes = NodeTable(
         node_id=np.arange(m, dtype=np.int64), parent=np.asarray(parent, dtype=np.int64),
