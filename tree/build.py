@@ -6,7 +6,8 @@ classifier scores every proposal's children; each proposal gets ``xi = w . e``
 the model's probability that it is right; the best is kept if that score reaches the
 threshold and the recursion goes on in its children down to ``max_depth``. An explicit
 stack replaces the paper's recursion. A storeys cut is judged one level further (its
-storeys' own proposals: ``look_ahead``).
+storeys' own proposals: ``look_ahead``), and its bands are cut into storeys again only
+where no bay cut (S2, S3) reaches the threshold.
 
 Element instances (``../shared/METHOD.md``, "Classes"): the largest node whose class is an
 element class (arch, dome, minaret, pillar) and whose ancestors are not; every point below
