@@ -692,14 +692,15 @@ def test_the_shafts_of_a_clustered_pillar_are_one_post():
     assert all(np.ptp(np.vstack(pieces)[c, 0]) < 2.0 for c in found)
 
 
-def test_a_root_called_dome_gives_up_the_posts_called_pillar():
-    """The posts of a frame HollowNet calls dome are pillar instances, the slab and the
-    cap one more child; posts called something else, or a root called wall or arch
-    (an arcade's piers) or other (a scaffold's poles), stay whole."""
+@pytest.mark.parametrize("whole", [ClassId.DOME, ClassId.OTHER])
+def test_a_root_called_dome_or_other_gives_up_the_posts_called_pillar(whole):
+    """The posts of a frame HollowNet calls dome, or other (a whole pavilion often is,
+    tree-v35), are pillar instances, the slab and the cap one more child; posts called
+    something else, or a root called wall or arch (an arcade's piers), stay whole."""
     from hollowtree.tree.sequences import POST_SEQUENCE
 
     xyz, part = _posts_under_a_slab(np.random.default_rng(2))
-    r = build_tree(xyz, _SlenderPillarElseDome(), rng=0, split=_Never())
+    r = build_tree(xyz, _SlenderPillarElseDome(other=int(whole)), rng=0, split=_Never())
     kids = r.nodes.children(0)
     assert r.nodes.sequence[kids].tolist() == [POST_SEQUENCE] * 5
     own = []
@@ -717,9 +718,8 @@ def test_a_root_called_dome_gives_up_the_posts_called_pillar():
     assert r.nodes.sequence[r.nodes.children(rest)].tolist() == [PART_SEQUENCE] * 2
     floor, top = np.arange(len(xyz))[-3000:], np.flatnonzero((part == 0) & (xyz[:, 2] >= 3.0))
     assert len(np.intersect1d(np.unique(r.leaf[floor]), np.unique(r.leaf[top]))) == 0
-    for whole, posts_as in ((ClassId.DOME, ClassId.OTHER), (ClassId.WALL, ClassId.PILLAR),
-                            (ClassId.ARCH, ClassId.PILLAR), (ClassId.OTHER, ClassId.PILLAR)):
-        r2 = build_tree(xyz, _SlenderPillarElseDome(int(posts_as), int(whole)), rng=0, split=_Never())
+    for root, posts_as in ((whole, ClassId.OTHER), (ClassId.WALL, ClassId.PILLAR), (ClassId.ARCH, ClassId.PILLAR)):
+        r2 = build_tree(xyz, _SlenderPillarElseDome(int(posts_as), int(root)), rng=0, split=_Never())
         assert len(r2.nodes) == 1
 
 
