@@ -60,7 +60,8 @@ class TreeStageParams(Params, owner="tree"):
         memory follows this bound rather than the scan; 0 = never sample.
     pillar_max_height : float or None
         A part HollowNet calls pillar that is taller than this many metres is a minaret
-        (``tree/tall.py``: HollowNet cannot see size); None keeps HollowNet's class.
+        (``tree/tall.py``: HollowNet cannot see size); None (the default) keeps HollowNet's
+        class: 10 m, a rule from the five paper sites, lowered the validation F1 sum.
     verify : bool
         Run the element check (``tree/verify.py``) on every element instance after the merge.
     verify_model : str or None
@@ -94,11 +95,10 @@ class TreeStageParams(Params, owner="tree"):
         doc="an element group with more points builds its tree on a seeded sample of this many (0 or at least "
             "1000); its points take their nearest sampled point's labels (bounded memory); 0 = never sample")
     pillar_max_height: float | None = param(
-        10.0, gt=0,
-        doc="a part HollowNet calls pillar that is taller than this (m) is a minaret unless its footprint is flat, "
-            "and a minaret instance not taller than this is a pillar (HollowNet cannot see size; its training "
-            "pillars are 2.5-8 m, its minarets 12-40 m); with it on, a dome instance taller than this and more "
-            "than 1.5 times as tall as it is wide is a minaret; null = HollowNet's class as it is")
+        None, gt=0,
+        doc="a part HollowNet calls pillar taller than this (m) is a minaret unless its footprint is flat, a "
+            "minaret instance not taller a pillar, a dome instance taller and over 1.5 times as tall as wide a "
+            "minaret (HollowNet cannot see size); null (default) = HollowNet's class")
     other_max_base: float | None = param(
         2.0, gt=0,
         doc="a part HollowNet calls other (clutter) whose lowest point is more than this (m) above the local "
@@ -107,8 +107,7 @@ class TreeStageParams(Params, owner="tree"):
     other_max_size: float | None = param(
         15.0, gt=0,
         doc="a part HollowNet calls other (clutter) larger than this (m) along x, y or z takes its next most "
-            "probable class (its largest training clutter, trees, is at most 12 m tall and 11 m wide); null = no "
-            "such test")
+            "probable class (training trees are at most 12 m); null = no such test")
 
     verify: bool = param(
         True, doc="the element check (tree/verify.py): a learned decision on every element instance after the "

@@ -75,7 +75,7 @@ def test_a_tall_flat_strip_stays_a_pillar():
 
 
 def test_tree_params_validate_the_bound():
-    assert TreeStageParams().pillar_max_height == 10.0
+    assert TreeStageParams().pillar_max_height is None  # off by default (tree-v35 validation)
     assert TreeStageParams(pillar_max_height=None).pillar_max_height is None
     for bad in (0.0, -1.0, float("inf")):
         with pytest.raises(ConfigError, match="pillar_max_height"):
@@ -93,7 +93,7 @@ def test_short_minarets_are_pillars_per_instance_in_the_tree_stage():
         short_minarets([M], [1.0, 2.0], 10.0)
     rng = np.random.default_rng(3)
     t = rng.uniform(0, 2 * np.pi, 3000)
-    params = TreeStageParams(max_depth=0, roof_min_height=None)
+    params = TreeStageParams(max_depth=0, roof_min_height=None, pillar_max_height=10.0)
     for height, want in ((2.0, P), (25.0, M)):
         xyz = np.c_[0.3 * np.cos(t), 0.3 * np.sin(t), rng.uniform(0, height, 3000)]
         values, cols, n_inst = _group_tree(xyz, 0, params, _Always(M), None, 0)
@@ -120,7 +120,7 @@ def test_slender_domes_are_minarets_per_instance_in_the_tree_stage():
         slender_domes([dome], [1.0, 2.0], [1.0], 10.0)
     rng = np.random.default_rng(4)
     t = rng.uniform(0, 2 * np.pi, 3000)
-    params = TreeStageParams(max_depth=0, roof_min_height=None)
+    params = TreeStageParams(max_depth=0, roof_min_height=None, pillar_max_height=10.0)
     for radius, height, want in ((2.0, 23.0, M), (3.0, 7.0, dome), (1.0, 3.8, dome)):
         xyz = np.c_[radius * np.cos(t), radius * np.sin(t), rng.uniform(0, height, 3000)]
         values, cols, _ = _group_tree(xyz, 0, params, _Always(dome), None, 0)
@@ -208,7 +208,7 @@ def test_the_tree_stage_reads_the_clutter_rule_from_its_params():
 
     rng = np.random.default_rng(5)
     xyz = rng.uniform(0, 1, (3000, 3)) * [4.0, 4.0, 3.0] + [0, 0, 11.0]
-    params = TreeStageParams(max_depth=0, roof_min_height=None)
+    params = TreeStageParams(max_depth=0, roof_min_height=None, pillar_max_height=10.0)
     values, cols, n_inst = _group_tree(xyz, 0, params, _Clutter(), 0.0, 0)
     assert cols["class_id"] == [D]
     assert set(values["class"].tolist()) == {D}

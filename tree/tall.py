@@ -4,7 +4,8 @@ HollowNet scales every part to fit its 30^3 grid, so a slender minaret and a col
 alike; on the temple's minarets (44 m) it says ``pillar`` for the whole minaret
 (docs/decisions/method.md). The training scenes of HollowNet hold pillars of 2.5-8 m and minarets
 of 12-40 m (``hollownet/_scenes.py``), so a part classed pillar that is taller than a
-bound between the two (``tree.pillar_max_height``, 10 m) is called a minaret, unless its
+bound between the two (``tree.pillar_max_height``: 10 m where set; off by default, as it did
+not earn its place on the validation split) is called a minaret, unless its
 footprint is flat: a minaret is round or polygonal seen from above, even when only one
 side of it was scanned (a half shaft: short over long side about 0.5), while a tall
 strip of a wall, a portal's jamb say, is a plane (about 0). Parts whose footprint's short
