@@ -52,12 +52,18 @@ VAL_VARIANTS = {
     "generalize-val-4m-tree-v31.json": "`tree-v31`: a bay one face thin is a piece",
     "generalize-val-4m-tree-v32.json": "`tree-v32`: a close call judged by two draws",
     "generalize-val-4m-tree-v33.json": "`tree-v33`: a shaft's halves side by side",
-    "generalize-val-4m-curved-rows.json": "rejected: arcade rows on circles too",
-    "generalize-val-4m-storey-bands.json": "rejected: no storeys in a storeys band",
     "generalize-val-4m-tree-v34.json": "`tree-v34`: a band's bays before its storeys",
     "generalize-val-4m-tree-voxel.json": "rejected: the tree on 3 cm cubes",
     "generalize-val-4m-tree-v35.json": "`tree-v35`: posts from roots called clutter",
-    "generalize-val-4m-tall-off.json": "`tree-v35`, the tall-pillar rules off (the default)",
+    "generalize-val-4m-tall-off.json": "`tree-v35`, the tall-pillar rules off",
+    "generalize-val-4m-tree-v36.json": "`tree-v36`: the circle settled on the cells (seed 0)",
+}
+#: Variants judged on tree seeds 0, 1 and 2 (the selection rule from ``tree-v36``,
+#: docs/generalize.md): the name part of their JSONs (``generalize-val-4m-<name>.json`` is
+#: seed 0, ``...-<name>-seed1.json`` seed 1, ...), in the order they were run.
+VAL_SEEDS = {
+    "tall-off": "`tree-v35`, tall-pillar rules off",
+    "tree-v36": "`tree-v36`: the circle settled on the cells",
 }
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
 BEGIN = re.compile(r"<!-- generated: ([\w.-]+) -->\n")
@@ -442,6 +448,32 @@ def val_history() -> str:
     return "\n".join(out)
 
 
+def _three_rows(name: str) -> tuple[float, float, float] | None:
+    """F1 of one run's three validation rows (0.5-2 M, 4 M, 10 M), or None where one is missing."""
+    files = [RESULTS / f"generalize-{row}-{name}.json" for row in ("val", "val-4m", "val-density-10m")]
+    if not all(f.is_file() for f in files):
+        return None
+    a, b, c = (_f1(json.loads(f.read_text())) for f in files)
+    return a, b, c
+
+
+def val_seeds() -> str:
+    """Each variant of :data:`VAL_SEEDS`: each row's F1 averaged over tree seeds 0-2, the F1 sum
+    per seed, the sums' mean and range (the selection rule from ``tree-v36``)."""
+    out = ["| variant | 0.5-2 M | 4 M | 10 M | F1 sum, seeds 0 / 1 / 2 | mean | range |",
+           "| --- | --- | --- | --- | --- | --- | --- |"]
+    for name, what in VAL_SEEDS.items():
+        runs = [r for r in (_three_rows(name if k == 0 else f"{name}-seed{k}") for k in range(3)) if r is not None]
+        if not runs:
+            continue
+        sums = [sum(r) for r in runs]
+        rows = [sum(r[j] for r in runs) / len(runs) for j in range(3)]
+        out.append(f"| {what} | " + " | ".join(f"{x:.3f}" for x in rows) + " | "
+                   + " / ".join(f"{x:.3f}" for x in sums)
+                   + f" | **{sum(sums) / len(sums):.3f}** | {max(sums) - min(sums):.3f} |")
+    return "\n".join(out)
+
+
 # --- docs/workflows.md -------------------------------------------------------------------
 
 def _resolve(schema: dict, node: dict) -> dict:
@@ -539,6 +571,7 @@ GENERATORS: dict[str, Callable[[], str]] = {
     "store": store,
     "derawar": derawar,
     "val-history": val_history,
+    "val-seeds": val_seeds,
     "workflow-keys": workflow_keys,
 }
 

@@ -10,6 +10,7 @@ import pytest
 from hollowtree.tree.energy import e1, e2, e3, e4, e5, energy_terms
 from hollowtree.tree.operators import (
     TransportCurve,
+    _occupied,
     fit_circle,
     h,
     p,
@@ -231,7 +232,8 @@ def test_a_colonnade_under_a_slab_has_no_transport_curve_whatever_the_seed():
 def test_a_curved_wall_with_one_crowded_bay_keeps_its_curve():
     """A station beside one bay of a 20 m arc puts 70x the points there, 1 m deep: the points'
     best circle is that bay's own short arc, which reads straight. Refitted on the occupied
-    cells, the wall's circle comes back, its inlier share still counted on the points."""
+    cells, the wall's circle comes back, its inlier share still counted on the points.
+    (Settling a circle on the cells rescues some points' fits too.)"""
     hits = {False: 0, True: 0}
     for seed in range(20):
         rng = np.random.default_rng(seed)
@@ -242,10 +244,10 @@ def test_a_curved_wall_with_one_crowded_bay_keeps_its_curve():
         for refit in (False, True):
             c = psi(xy, refit_cells=refit, rng=seed)
             hits[refit] += bool(c) and abs(c.radius - 20.0) < 1.0
-            if refit and c:
+            if refit and c:  # the share is the points' (about half), not the cells' (over 0.8)
                 thr = 0.01 * float(np.hypot(*np.ptp(xy, axis=0)))  # psi's default
-                assert c.inlier_fraction == pytest.approx(np.mean(c.residuals(xy) < thr), abs=0.05)
-    assert hits[False] <= 2 < 10 <= hits[True], hits
+                assert c.inlier_fraction < 0.7 < np.mean(c.residuals(_occupied(xy, thr / 2)) < thr)
+    assert hits[False] < 10 <= hits[True], hits
 
 
 def _facade(solid, *, top: float, step: float = 0.05) -> np.ndarray:
@@ -327,3 +329,24 @@ def test_energy_terms_as_method_md_writes_them():
     assert e.tolist() == pytest.approx([e1([10, 20]), 0.3, e3(2), W[6, 1], 0.75])
     with pytest.raises(ValueError, match="sequence"):
         e4(W, 6, 4)
+
+
+def test_a_thick_curved_wall_gives_one_circle_whatever_the_draw():
+    """A 30 m arc of a wall with depth (a face at 30 m, piers 1.2 m in front of it every
+    4 m): RANSAC's best circle moves from draw to draw (several circles hold about as
+    many points), the settled one does not, and S3 cuts the same bays every draw."""
+    rng = np.random.default_rng(3)
+    t = rng.uniform(0.0, 1.0, 40_000)
+    on_pier = (t * 30.0) % 4.0 < 1.0
+    r = np.where(on_pier, 28.8, 30.0) + rng.normal(0.0, 0.03, len(t))
+    xy = np.column_stack([r * np.cos(t), r * np.sin(t)])
+    ransac = [fit_circle(xy, residual_threshold=0.01 * float(np.hypot(*np.ptp(xy, axis=0))), rng=d)
+              for d in range(8)]
+    settled = [psi(xy, sides=(), rng=d) for d in range(8)]
+    spread = lambda cs: max(float(np.hypot(*(np.subtract(a.center, b.center)))) for a in cs for b in cs)  # noqa: E731
+    assert spread(ransac) > 0.05
+    assert spread(settled) < 1e-3
+    z = rng.uniform(0.0, 6.0, len(t))
+    xyz = np.column_stack([xy, z])
+    cuts = {tuple(np.round(s3(xyz, rng=d).cuts, 3)) for d in range(4)}
+    assert len(cuts) == 1
