@@ -32,15 +32,15 @@ RESULTS = REPO / "benchmarks" / "results"
 #: The latest run of each kind of element-recall result (``bench_generalize.py --json``).
 #: These are the figures of docs/generalize.md; edit the file names when a newer run replaces one.
 LATEST = {
-    "test": "generalize-test-tall-off.json",
-    "test-5m": "generalize-test-5m-tall-off.json",
-    "val-4m": "generalize-val-4m-tall-off.json",
-    "val-1m": "generalize-val-density-1m-tall-off.json",
-    "val-10m": "generalize-val-density-10m-tall-off.json",
-    "val": "generalize-val-tall-off.json",
+    "test": "generalize-test-tree-v36.json",
+    "test-5m": "generalize-test-5m-tree-v36.json",
+    "val-4m": "generalize-val-4m-tree-v36-final.json",
+    "val-1m": "generalize-val-density-1m-tree-v36.json",
+    "val-10m": "generalize-val-density-10m-tree-v36-final.json",
+    "val": "generalize-val-tree-v36-final.json",
     # the latest run with the paper's energy path (other runs pass --no-energy; it runs with
     # tree.verify=false, so tree-v25 and tree-v26 did not change it)
-    "test-energy": "generalize-test-energy-tall-off.json",
+    "test-energy": "generalize-test-tree-v36.json",
 }
 
 #: What each validation variant of docs/decisions/method.md was (``generalize-val-4m*.json``;
@@ -56,7 +56,8 @@ VAL_VARIANTS = {
     "generalize-val-4m-tree-voxel.json": "rejected: the tree on 3 cm cubes",
     "generalize-val-4m-tree-v35.json": "`tree-v35`: posts from roots called clutter",
     "generalize-val-4m-tall-off.json": "`tree-v35`, the tall-pillar rules off",
-    "generalize-val-4m-tree-v36.json": "`tree-v36`: the circle settled on the cells (seed 0)",
+    "generalize-val-4m-tree-v36.json": "`tree-v36`: the circle settled on the cells",
+    "generalize-val-4m-tree-v36-final.json": "`tree-v36` without the second draw (the default)",
 }
 #: Variants judged on tree seeds 0, 1 and 2 (the selection rule from ``tree-v36``,
 #: docs/generalize.md): the name part of their JSONs (``generalize-val-4m-<name>.json`` is
@@ -64,6 +65,7 @@ VAL_VARIANTS = {
 VAL_SEEDS = {
     "tall-off": "`tree-v35`, tall-pillar rules off",
     "tree-v36": "`tree-v36`: the circle settled on the cells",
+    "no-redraw": "`tree-v36`, no second draw of close calls (`tree-v32`'s)",
 }
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
 BEGIN = re.compile(r"<!-- generated: ([\w.-]+) -->\n")

@@ -55,11 +55,6 @@ _BAYS = (2, 3)
 #: calls a minaret, as it calls a tall curved arcade facade seen whole. Chosen on the
 #: validation split (docs/generalize.md).
 LOOK_AHEAD_FROM = (_WALL, int(ClassId.MINARET))
-#: With a split model, a node whose best proposal's probability lies within this of the
-#: threshold is proposed again with a second draw of the fits (``psi``'s RANSAC), and each
-#: proposal is judged by its two draws' mean probability: one draw of the circle can move a
-#: curved storey's cuts into bays and its probability from 0.46 to 0.95 (docs/method.md).
-REDRAW_MARGIN = 0.1
 #: A storey is looked into (``build_tree(look_ahead=)``) when under this share of its wall
 #: projection's cells is occupied (:func:`_solid_share`): it has a row of openings.
 OPEN_STOREY = 0.8
@@ -225,24 +220,6 @@ def _solid_share(pts: FloatArray, params: SequenceParams) -> float:
     k = np.floor((tz - column_min(tz)) * (1.0 / cell)).astype(np.int64)
     n = column_max(k) + 1
     return len(np.unique(k[:, 0] * n[1] + k[:, 1])) / float(n[0] * n[1])
-
-
-def _mean_of_draws(first: list[tuple[float, int, Any]], second: list[tuple[float, int, Any]]
-                   ) -> list[tuple[float, int, Any]]:
-    """Each key's ``(probability, key, proposal)`` of two draws of a node's proposals, judged
-    by the mean of its two probabilities, the draw of the higher one kept; a key only one
-    draw proposes counts 0 in the other (:data:`REDRAW_MARGIN`).
-
-    >>> [(round(x, 3), k, c) for x, k, c in _mean_of_draws([(0.46, 3, "a"), (0.4, 2, "b")], [(0.74, 3, "c")])]
-    [(0.6, 3, 'c'), (0.2, 2, 'b')]
-    """
-    other = {k: (x, c) for x, k, c in second}
-    out = []
-    for x, k, c in first:
-        y, d = other.pop(k, (0.0, c))
-        out.append((0.5 * (x + y), k, c if x >= y else d))
-    out += [(0.5 * y, k, d) for k, (y, d) in other.items()]
-    return out
 
 
 def build_tree(
@@ -472,11 +449,6 @@ def build_tree(
                 _split_parts(node, idx, pts)
             continue
         x, key, (pr, e, c_cls, c_sc, c_pr) = _best(scored)
-        if split is not None and abs(x - thr_split) < REDRAW_MARGIN:
-            scored = _bays_first(node, _mean_of_draws(scored, _scored(
-                pts, depth[node], cls[node], probs[node],
-                np.random.default_rng(np.random.SeedSequence([base, node, 1])))))
-            x, key, (pr, e, c_cls, c_sc, c_pr) = _best(scored)
         keep = x >= thr_split
         storey = [t for t in scored if t[1] == _STOREYS]
         if not keep and storey and look_ahead and cls[node] in LOOK_AHEAD_FROM and depth[node] + 1 < max_depth:
