@@ -19,7 +19,9 @@ The sequences ``S1``, ``S2`` and ``S3`` that chain them are in :mod:`tree.sequen
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Literal
 
@@ -195,11 +197,11 @@ def psi(
     size = float(np.hypot(*_span(pts)[:2]))
     thr = float(residual_threshold) if residual_threshold is not None else max(0.02, 0.01 * size)
     fit = _subsample(pts, _FIT_SAMPLE, rng)
-    occupied = _occupied(pts, 0.5 * thr)
+    occupied = functools.cache(lambda: _occupied(pts, 0.5 * thr))  # made when first needed
     curve = _psi_on(fit, fit, occupied, thr, size, sides, max_trials, straightness, rng)
     if isinstance(curve, TransportCurve) or not refit_cells:
         return curve
-    cells = _subsample(occupied, _FIT_SAMPLE, rng)
+    cells = _subsample(occupied(), _FIT_SAMPLE, rng)
     again = _psi_on(cells, fit, occupied, thr, size, sides, max_trials, straightness, rng)
     return again if isinstance(again, TransportCurve) else curve
 
@@ -242,11 +244,11 @@ def settle(circle: TransportCurve, cells: FloatArray, thr: float, *, band: float
     return replace(circle, center=(float(c[0]), float(c[1])), radius=r)
 
 
-def _psi_on(sample: FloatArray, fit: FloatArray, occupied: FloatArray, thr: float, size: float,
+def _psi_on(sample: FloatArray, fit: FloatArray, occupied: Callable[[], FloatArray], thr: float, size: float,
             sides: tuple[int, ...], max_trials: int, straightness: float,
             rng: np.random.Generator) -> TransportCurve | FailedFit:
     """``psi``'s fits on ``sample``, the curve's inlier share and RMS on ``fit``; a circle
-    that wins is settled on the footprint's ``occupied`` cells (:func:`settle`)."""
+    that wins is settled on the footprint's ``occupied()`` cells (:func:`settle`)."""
     circle = fit_circle(sample, residual_threshold=thr, max_trials=max_trials, rng=rng)
     if not circle:
         return circle
@@ -271,7 +273,7 @@ def _psi_on(sample: FloatArray, fit: FloatArray, occupied: FloatArray, thr: floa
         best = replace(best, inlier_fraction=float(ok.mean()),
                        rms=float(np.sqrt(np.mean(res[ok] ** 2))) if ok.any() else best.rms)
     # A circle's place settles on the cells; its share and RMS stay those of the fit that chose it.
-    return settle(best, occupied, thr) if best.n_sides == 0 else best
+    return settle(best, occupied(), thr) if best.n_sides == 0 else best
 
 
 def _occupied(xy: FloatArray, cell: float) -> FloatArray:
