@@ -239,8 +239,6 @@ def settle(circle: TransportCurve, cells: FloatArray, thr: float, *, band: float
         c, r = c2, r2
         if moved < 1e-6 * max(r, 1.0):
             break
-    if r == circle.radius and c[0] == circle.center[0] and c[1] == circle.center[1]:
-        return circle
     return replace(circle, center=(float(c[0]), float(c[1])), radius=r)
 
 
