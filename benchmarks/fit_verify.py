@@ -19,13 +19,15 @@ that a rejected arch no longer joins an arcade row, so the chosen threshold is c
 with a real run.
 
 Run: ``python benchmarks/fit_verify.py fit out/gen-train --out tree/data/verify-v1.json
---threshold T`` and ``python benchmarks/fit_verify.py sweep out/gen-val4m --model
+--threshold T [--class-threshold pillar=0.4 ...]`` and ``python benchmarks/fit_verify.py sweep out/gen-val4m --model
 tree/data/verify-v1.json``.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
+import re
 import sys
 from pathlib import Path
 
@@ -47,9 +49,10 @@ _ELEMENTS = np.asarray([int(c) for c in ELEMENT_CLASSES])
 
 
 def _seed(store: Path) -> int | None:
-    """The procedural seed of a ``bench_generalize`` store (``gen-<seed>-<points>.zarr``), else None."""
-    parts = store.name.split("-")
-    return int(parts[1]) if len(parts) == 3 and parts[0] == "gen" and parts[1].isdigit() else None
+    """The procedural seed of a ``bench_generalize`` store (``gen-v2-<seed>-<points>.zarr``,
+    ``gen-<seed>-<points>.zarr`` before ``gen-v2``), else None."""
+    m = re.fullmatch(r"gen(?:-v\d+)?-(\d+)-\d+", store.name.removesuffix(".zarr"))
+    return int(m.group(1)) if m else None
 
 
 def _matches(gc: np.ndarray, gi: np.ndarray, pc: np.ndarray, pi: np.ndarray) -> dict[int, int]:
@@ -116,7 +119,7 @@ def _stores(paths: list[Path]) -> list[Path]:
     return out
 
 
-def fit(work: list[Path], out: Path, threshold: float) -> int:
+def fit(work: list[Path], out: Path, threshold: float, class_thresholds: dict[int, float] | None = None) -> int:
     from sklearn.ensemble import GradientBoostingClassifier
     from sklearn.metrics import roc_auc_score
     from sklearn.model_selection import GroupKFold
@@ -151,7 +154,7 @@ def fit(work: list[Path], out: Path, threshold: float) -> int:
         imp = sorted(zip(m.feature_importances_.tolist(), VERIFY_FEATURES, strict=True), reverse=True)
         print(ClassId(c).label, int(yc.sum()), "AUC", info["auc"][ClassId(c).label], "|",
               ", ".join(f"{n} {v:.2f}" for v, n in imp[:6]), flush=True)
-    ElementCheck(models=models, threshold=threshold, info=info).save(out)
+    ElementCheck(models=models, threshold=threshold, info=info, class_thresholds=class_thresholds or {}).save(out)
     return 0
 
 
@@ -215,6 +218,8 @@ def main(argv: list[str] | None = None) -> int:
     f.add_argument("work", type=Path, nargs="+", help="bench_generalize work folders (training split) or stores")
     f.add_argument("--out", type=Path, required=True)
     f.add_argument("--threshold", type=float, default=0.5)
+    f.add_argument("--class-threshold", nargs="+", default=[], metavar="CLASS=T",
+                   help="a class's own threshold (chosen with sweep --vary), e.g. dome=0.3")
     s = sub.add_parser("sweep")
     s.add_argument("work", type=Path, nargs="+", help="bench_generalize work folders (validation split) or stores")
     s.add_argument("--model", type=Path, default=None)
@@ -224,7 +229,17 @@ def main(argv: list[str] | None = None) -> int:
                    help="sweep only this class's threshold (each in turn), the others keeping the model's")
     a = ap.parse_args(argv)
     if a.cmd == "fit":
-        return fit(a.work, a.out, a.threshold)
+        per = {}
+        for item in a.class_threshold:
+            name, _, t = item.partition("=")
+            try:
+                c, v = int(class_id(name)), float(t)
+            except ValueError:
+                c, v = -1, math.nan
+            if c not in _ELEMENTS or not 0.0 <= v <= 1.0:
+                ap.error(f"--class-threshold {item!r}: expected CLASS=T, an element class and a number in [0, 1]")
+            per[c] = v
+        return fit(a.work, a.out, a.threshold, per)
     return sweep(a.work, a.model, a.thresholds, not a.reject_only, a.vary)
 
 
