@@ -53,10 +53,8 @@ VAL_VARIANTS = {
     "generalize-val-4m-tree-v32.json": "`tree-v32`: a close call judged by two draws",
     "generalize-val-4m-tree-v33.json": "`tree-v33`: a shaft's halves side by side",
     "generalize-val-4m-tree-v34.json": "`tree-v34`: a band's bays before its storeys",
-    "generalize-val-4m-tree-voxel.json": "rejected: the tree on 3 cm cubes",
     "generalize-val-4m-tree-v35.json": "`tree-v35`: posts from roots called clutter",
     "generalize-val-4m-tall-off.json": "`tree-v35`, the tall-pillar rules off",
-    "generalize-val-4m-tree-v36.json": "`tree-v36`: the circle settled on the cells",
     "generalize-val-4m-tree-v36-final.json": "`tree-v36` without the second draw (the default)",
 }
 #: Variants judged on tree seeds 0, 1 and 2 (the selection rule from ``tree-v36``,
@@ -66,6 +64,7 @@ VAL_SEEDS = {
     "tall-off": "`tree-v35`, tall-pillar rules off",
     "tree-v36": "`tree-v36`: the circle settled on the cells",
     "no-redraw": "`tree-v36`, no second draw of close calls (`tree-v32`'s)",
+    "check-refit": "rejected: the element check refitted on `tree-v36`'s output",
 }
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
 BEGIN = re.compile(r"<!-- generated: ([\w.-]+) -->\n")
