@@ -27,6 +27,11 @@ from collections.abc import Callable
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
+if str(REPO / "benchmarks") not in sys.path:
+    sys.path.insert(0, str(REPO / "benchmarks"))
+
+from results_md import spread_table, table1  # noqa: E402
+
 RESULTS = REPO / "benchmarks" / "results"
 
 #: The latest run of each kind of element-recall result (``bench_generalize.py --json``).
@@ -41,6 +46,8 @@ LATEST = {
     # the latest run with the paper's energy path (other runs pass --no-energy; it runs with
     # tree.verify=false, so tree-v25 and tree-v26 did not change it)
     "test-energy": "generalize-test-tree-v36.json",
+    # docs/results.md: the paper's five sites, a report set (hollowtree evaluate --seeds 3)
+    "five-sites": "five-sites-10m-tree-v36.json",
 }
 
 #: What each validation variant of docs/decisions/method.md was (``generalize-val-4m*.json``;
@@ -400,20 +407,14 @@ def store() -> str:
 
 # --- docs/results.md ---------------------------------------------------------------------
 
-def derawar() -> str:
-    """The paper's Derawar at 1 M points per tree version (``hollowtree evaluate --json``)."""
-    out = ["| tree | ransac | ransac+dbscan | tree | tree - ransac+dbscan | bastions found (of GT) | predicted | precision | source |",
-           "| --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | --- |"]
-    for f in sorted(RESULTS.glob("derawar-1m-*.json")):
-        d = json.loads(f.read_text())
-        s = d["sites"][0]
-        m = {k: v["mean_iou_pct"] for k, v in s["methods"].items()}
-        c = s["methods"]["tree"]["classes"]["minaret"]
-        label = f.stem.removeprefix("derawar-1m-")
-        out.append(f"| `{label}` | {m['ransac']:.1f} | {m['ransac+dbscan']:.1f} | {m['tree']:.1f} | "
-                   f"{m['tree'] - m['ransac+dbscan']:+.1f} | {c['n_found']} / {c['n_gt']} ({c['accuracy_pct']:.1f} %) | "
-                   f"{c['n_pred']} | {c['precision_pct']:.1f} % | `{f.name}` |")
-    return "\n".join(out)
+def five_sites() -> str:
+    """The paper's five sites at 10 M points (``hollowtree evaluate --seeds 3 --json``):
+    Table 1 beside the paper's (seed 0), then mean (min to max) over the seeds."""
+    d = json.loads((RESULTS / LATEST["five-sites"]).read_text())
+    code = ", ".join(f"`{d[k]}`" for k in ("tree_algorithm", "coarse_algorithm", "grid_algorithm"))
+    return "\n".join([f"{code}, seed 0, source `{LATEST['five-sites']}`:", "", table1(d), "",
+                      f"Mean (min to max) over seeds 0 to {d['spread']['n_seeds'] - 1} (`coarse.seed`, `tree.seed`):",
+                      "", spread_table(d["spread"])])
 
 
 # --- docs/decisions/method.md ------------------------------------------------------------
@@ -570,7 +571,7 @@ GENERATORS: dict[str, Callable[[], str]] = {
     "tree-whole": tree_whole,
     "workflow": workflow,
     "store": store,
-    "derawar": derawar,
+    "five-sites": five_sites,
     "val-history": val_history,
     "val-seeds": val_seeds,
     "workflow-keys": workflow_keys,

@@ -1,8 +1,10 @@
 """Markdown tables for docs/results.md from the JSON of ``hollowtree evaluate``.
 
 Run: ``python benchmarks/results_md.py out/evaluate/evaluate.json``. Prints the Table 1
-comparison with the paper, one table per site and method, and the mean IoU summary (of the
-first seed), then, for a run with ``--seeds N``, the spread over the seeds.
+comparison with the paper (the first seed), one table per site and method, the mean IoU
+summary, then, for a run with ``--seeds N``, the spread over the seeds. The Table 1 and
+spread tables of docs/results.md are generated from the checked-in JSON by
+``benchmarks/report.py`` with the same functions.
 """
 
 from __future__ import annotations
@@ -30,41 +32,16 @@ def _gaa(c: dict) -> str:
     return f"{c['n_gt']}/{c['n_found']}/{_f(c['accuracy_pct'])}"
 
 
-def main(path: str) -> None:
-    d = json.loads(Path(path).read_text())
-    sites = d["sites"]
-    print("| site | paper arches | ours arches | paper domes | ours domes | paper minarets | ours minarets |")
-    print("| --- | --- | --- | --- | --- | --- | --- |")
-    for s in sites:
+def table1(d: dict) -> str:
+    """The paper's Table 1 beside the tree's GT / AG / Acc % (the run's first seed)."""
+    out = ["| site | paper arches | ours arches | paper domes | ours domes | paper minarets | ours minarets |",
+           "| --- | --- | --- | --- | --- | --- | --- |"]
+    for s in d["sites"]:
         c = s["methods"]["tree"]["classes"]
         p = PAPER.get(s["name"], ("-", "-", "-"))
-        print(f"| {s['name']} | {p[0]} | {_gaa(c['arch'])} | {p[1]} | {_gaa(c['dome'])} | {p[2]} | {_gaa(c['minaret'])} |")
-    for s in sites:
-        print(f"\n### {s['name']} ({s['n_points']:,} points, {s['n_segments']} coarse segments, "
-              f"{s['n_primitives']} stitched RANSAC primitives)\n")
-        print("| method | class | GT | AG | Acc % | pred | prec % | point IoU % |")
-        print("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |")
-        for m, ev in s["methods"].items():
-            first = True
-            for name in ("ground", "wall", "roof", *ELEMENTS, "other"):
-                c = ev["classes"][name]
-                if not (c["n_gt"] or c["n_pred"]):
-                    continue
-                print(f"| {m if first else ''} | {name} | {c['n_gt']} | {c['n_found']} | {_f(c['accuracy_pct'])} | "
-                      f"{c['n_pred']} | {_f(c['precision_pct'])} | {_f(c['iou_pct'])} |")
-                first = False
-            n_cls = sum(1 for c in ev["classes"].values() if c["n_gt"] and c["class_id"] != 0)
-            print(f"| | **mean IoU ({n_cls} classes)** | | | | | | **{_f(ev['mean_iou_pct'])}** |")
-    print("\n| site | ransac | ransac+dbscan | tree | tree - ransac+dbscan |")
-    print("| --- | ---: | ---: | ---: | ---: |")
-    for s in sites:
-        m = {k: v["mean_iou_pct"] for k, v in s["methods"].items()}
-        print(f"| {s['name']} | {_f(m['ransac'])} | {_f(m['ransac+dbscan'])} | {_f(m['tree'])} | "
-              f"{m['tree'] - m['ransac+dbscan']:+.1f} |")
-
-
-    if "spread" in d:
-        spread(d["spread"])
+        out.append(f"| {s['name']} | {p[0]} | {_gaa(c['arch'])} | {p[1]} | {_gaa(c['dome'])} | {p[2]} | "
+                   f"{_gaa(c['minaret'])} |")
+    return "\n".join(out)
 
 
 def _r(s: dict, signed: bool = False) -> str:
@@ -72,18 +49,55 @@ def _r(s: dict, signed: bool = False) -> str:
     return f"{s['mean']:{f}} ({s['min']:{f}} to {s['max']:{f}})"
 
 
-def spread(sp: dict) -> None:
+def spread_table(sp: dict) -> str:
     """Mean (min to max) over the seeds, per site and over all sites."""
-    print(f"\nOver {sp['n_seeds']} seeds (coarse.seed and tree.seed +0 .. +{sp['n_seeds'] - 1}), "
-          "mean (min to max):\n")
-    print("| site | tree mean IoU % | tree - ransac+dbscan | arches found | domes found | minarets found |")
-    print("| --- | --- | --- | --- | --- | --- |")
+    out = ["| site | tree mean IoU % | tree - ransac+dbscan | arches found | domes found | minarets found |",
+           "| --- | --- | --- | --- | --- | --- |"]
     rows = [*sp["sites"].items(), (f"all {len(sp['sites'])} sites", sp["all"])]
     for name, s in rows:
         found = [f"{_r(s['found'][c])} of {s['found'][c]['n_gt']}" if c in s["found"] else "-"
                  for c in ("arch", "dome", "minaret")]
-        print(f"| {name} | {_r(s['tree_mean_iou_pct'])} | {_r(s['tree_minus_ransac+dbscan'], True)} | "
-              + " | ".join(found) + " |")
+        out.append(f"| {name} | {_r(s['tree_mean_iou_pct'])} | {_r(s['tree_minus_ransac+dbscan'], True)} | "
+                   + " | ".join(found) + " |")
+    return "\n".join(out)
+
+
+def details(d: dict) -> str:
+    """One table per site and method, then the mean IoU per site and method."""
+    out = []
+    for s in d["sites"]:
+        out += [f"\n### {s['name']} ({s['n_points']:,} points, {s['n_segments']} coarse segments, "
+                f"{s['n_primitives']} stitched RANSAC primitives)\n",
+                "| method | class | GT | AG | Acc % | pred | prec % | point IoU % |",
+                "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+        for m, ev in s["methods"].items():
+            first = True
+            for name in ("ground", "wall", "roof", *ELEMENTS, "other"):
+                c = ev["classes"][name]
+                if not (c["n_gt"] or c["n_pred"]):
+                    continue
+                out.append(f"| {m if first else ''} | {name} | {c['n_gt']} | {c['n_found']} | "
+                           f"{_f(c['accuracy_pct'])} | {c['n_pred']} | {_f(c['precision_pct'])} | {_f(c['iou_pct'])} |")
+                first = False
+            n_cls = sum(1 for c in ev["classes"].values() if c["n_gt"] and c["class_id"] != 0)
+            out.append(f"| | **mean IoU ({n_cls} classes)** | | | | | | **{_f(ev['mean_iou_pct'])}** |")
+    out += ["\n| site | ransac | ransac+dbscan | tree | tree - ransac+dbscan |", "| --- | ---: | ---: | ---: | ---: |"]
+    for s in d["sites"]:
+        m = {k: v["mean_iou_pct"] for k, v in s["methods"].items()}
+        out.append(f"| {s['name']} | {_f(m['ransac'])} | {_f(m['ransac+dbscan'])} | {_f(m['tree'])} | "
+                   f"{m['tree'] - m['ransac+dbscan']:+.1f} |")
+    return "\n".join(out)
+
+
+def main(path: str) -> None:
+    d = json.loads(Path(path).read_text())
+    print(table1(d))
+    print(details(d))
+    if "spread" in d:
+        sp = d["spread"]
+        print(f"\nOver {sp['n_seeds']} seeds (coarse.seed and tree.seed +0 .. +{sp['n_seeds'] - 1}), "
+              "mean (min to max):\n")
+        print(spread_table(sp))
 
 
 if __name__ == "__main__":

@@ -462,7 +462,7 @@ def format_spread(spread: dict[str, Any]) -> str:
     plural = {"arch": "arches"}
     lines = [f"evaluate: over {n} seeds, mean (min to max)",
              f"  {'site':<12}{'tree mean IoU %':<24}{'tree - ransac+dbscan':<24}"
-             + "".join(f"{plural.get(c, c + 's') + ' found':<28}" for c in SPREAD_CLASSES[:3])]
+             + "".join(f"{plural.get(c, c + 's') + ' found':<30}" for c in SPREAD_CLASSES[:3])]
     rows = [*spread["sites"].items(), (f"all {len(spread['sites'])}", spread["all"])]
     for name, s in rows:
         found = []
@@ -471,11 +471,20 @@ def format_spread(spread: dict[str, Any]) -> str:
             found.append("-" if f is None else f"{_range(f)} / {f['n_gt']}")
         lines.append(f"  {name:<12}{_range(s['tree_mean_iou_pct']):<24}"
                      f"{_range(s['tree_minus_ransac+dbscan'], signed=True):<24}"
-                     + "".join(f"{x:<28}" for x in found))
+                     + "".join(f"{x:<30}" for x in found))
     return "\n".join(line.rstrip() for line in lines)
 
 
 # ------------------------------------------------------------------------------ driver
+def _algorithms() -> dict[str, str]:
+    """The tree's, coarse stage's and grid's algorithm labels (every store of a run carries them)."""
+    from hollowtree.pipeline.coarse import COARSE_ALGORITHM
+    from hollowtree.pipeline.tree_stage import TREE_ALGORITHM
+    from hollowtree.tiling.grid import GRID_ALGORITHM
+
+    return {"tree_algorithm": TREE_ALGORITHM, "coarse_algorithm": COARSE_ALGORITHM, "grid_algorithm": GRID_ALGORITHM}
+
+
 def _is_store(text: str) -> bool:
     return (Path(text) / "zarr.json").is_file() or ("://" in text and Path(text).suffix.lower() not in SUFFIXES
                                                    and RunStore.exists(text))
@@ -585,7 +594,7 @@ def evaluate_inputs(
             complete = [r for r in runs if len(r) == len(inputs)]
             payload: dict[str, Any] = {
                 "hollowtree_evaluate": 1, "date": _dt.datetime.now().isoformat(timespec="seconds"),
-                "workflow": str(wf_path), "overrides": list(overrides), "machine": {
+                "workflow": str(wf_path), "overrides": list(overrides), **_algorithms(), "machine": {
                     "cpus": os.cpu_count(), "platform": platform.platform()},
                 "iou_threshold": 0.5, "matching": "greedy one-to-one by IoU (equals Hungarian at IoU >= 0.5)",
                 "seeds": seeds, "sites": [r.to_dict() for r in runs[0]]}

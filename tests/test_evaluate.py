@@ -16,6 +16,7 @@ import laspy
 import numpy as np
 import pytest
 
+from hollowtree.pipeline.tree_stage import TREE_ALGORITHM
 from hollowtree.scenes.metrics import (
     Evaluation,
     LabelCounts,
@@ -231,6 +232,8 @@ def test_evaluate_seeds_runs_each_input_once_per_seed(evaluated):
     assert spread["found"]["dome"]["values"] == [s["methods"]["tree"]["classes"]["dome"]["n_found"]
                                                  for s in (first, second)]
     assert "over 2 seeds" in proc.stdout
+    assert out["tree_algorithm"] == TREE_ALGORITHM
+    assert out["coarse_algorithm"].startswith("coarse-v")
 
 
 def test_seed_spread_by_hand():
