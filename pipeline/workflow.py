@@ -341,8 +341,9 @@ def load_workflow(path: str | Path, overrides: Sequence[str] = (), *, check_file
     except ValidationError as exc:
         loc, msg = _message(exc.errors()[0])
         key = ".".join(str(p) if isinstance(p, str) else f"[{p}]" for p in loc).replace(".[", "[")
-        setby = next((a for a in overrides
-                      if [str(x) for x in loc[:len(a.partition("=")[0].split("."))]] == a.partition("=")[0].split(".")), None)
+        # the --set whose path and the error's agree as far as the shorter goes: tree.x=1 for an
+        # error at tree.x.y, foo.bar=1 for an unknown section foo
+        setby = next((a for a in overrides if _same_branch(a.partition("=")[0].strip().split("."), loc)), None)
         line = None if setby else _line_of(node, loc)
         where = f":{line}" if line is not None else ""
         if setby:
@@ -358,6 +359,13 @@ def load_workflow(path: str | Path, overrides: Sequence[str] = (), *, check_file
                 where = f":{line}" if line is not None else ""
                 raise WorkflowError(f"{path}{where}: input.files[{i}]: file {f} does not exist")
     return wf
+
+
+def _same_branch(path: list[str], loc: Sequence[Any]) -> bool:
+    """Whether a ``--set`` key path and a validation error's location agree on their
+    common length (at least one key)."""
+    n = min(len(path), len(loc))
+    return n > 0 and [str(x) for x in loc[:n]] == path[:n]
 
 
 def _check_tree_files(wf: Workflow, path: Path | str, node: Any, overrides: Sequence[str]) -> None:

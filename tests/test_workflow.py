@@ -61,6 +61,7 @@ coarse:
     (GOOD + "clustr: {}\n", [], r"wf.yaml:6: clustr: unknown key \(did you mean 'cluster'\?\)"),
     (GOOD, ["cluster.workers=two"], r"wf.yaml: cluster.workers: .*integer.*\(from --set cluster.workers=two\)"),
     (GOOD, ["ingest.buffer=-2"], r"ingest.buffer: .*greater than or equal to 0.*--set ingest.buffer=-2"),
+    (GOOD, ["export.path=x.laz"], r"^\S+wf.yaml: export: unknown key \(from --set export.path=x.laz\)$"),
     (GOOD.replace("synth: {site: wazir_khan, points: 1000}", "synth: {site: atlantis}"), [],
      r"wf.yaml:2: input.synth.site: .*unknown site 'atlantis'"),
     ("input: [\n", [], r"wf.yaml:2: not valid YAML"),
