@@ -72,6 +72,7 @@ VAL_SEEDS = {
     "tree-v36": "`tree-v36`: the circle settled on the cells",
     "no-redraw": "`tree-v36`, no second draw of close calls (`tree-v32`'s)",
     "check-refit": "rejected: the element check refitted on `tree-v36`'s output",
+    "tall-on": "not adopted: `tree-v36` with the tall-pillar rules on (`tree.pillar_max_height=10`)",
 }
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
 BEGIN = re.compile(r"<!-- generated: ([\w.-]+) -->\n")
