@@ -37,17 +37,17 @@ RESULTS = REPO / "benchmarks" / "results"
 #: The latest run of each kind of element-recall result (``bench_generalize.py --json``).
 #: These are the figures of docs/generalize.md; edit the file names when a newer run replaces one.
 LATEST = {
-    "test": "generalize-test-tree-v36.json",
-    "test-5m": "generalize-test-5m-tree-v36.json",
-    "val-4m": "generalize-val-4m-tree-v36-final.json",
-    "val-1m": "generalize-val-density-1m-tree-v36.json",
-    "val-10m": "generalize-val-density-10m-tree-v36-final.json",
-    "val": "generalize-val-tree-v36-final.json",
+    "test": "generalize-test-group300k.json",
+    "test-5m": "generalize-test-5m-group300k.json",
+    "val-4m": "generalize-val-4m-group300k.json",
+    "val-1m": "generalize-val-density-1m-group300k.json",
+    "val-10m": "generalize-val-density-10m-group300k.json",
+    "val": "generalize-val-group300k.json",
     # the latest run with the paper's energy path (other runs pass --no-energy; it runs with
     # tree.verify=false, so tree-v25 and tree-v26 did not change it)
-    "test-energy": "generalize-test-tree-v36.json",
+    "test-energy": "generalize-test-group300k.json",
     # docs/results.md: the paper's five sites, a report set (hollowtree evaluate --seeds 3)
-    "five-sites": "five-sites-10m-tree-v36.json",
+    "five-sites": "five-sites-10m-group300k.json",
 }
 
 #: What each validation variant of docs/decisions/method.md was (``generalize-val-4m*.json``;
@@ -56,13 +56,11 @@ VAL_VARIANTS = {
     "generalize-val-4m.json": "`tree-v16` on `gen-v1` (the first baseline)",
     "generalize-val-4m-tree-v30.json": "`tree-v30` on `gen-v1` (its last)",
     "generalize-val-4m-gen-v2.json": "`tree-v30` on `gen-v2` (sites turned)",
-    "generalize-val-4m-tree-v31.json": "`tree-v31`: a bay one face thin is a piece",
     "generalize-val-4m-tree-v32.json": "`tree-v32`: a close call judged by two draws",
-    "generalize-val-4m-tree-v33.json": "`tree-v33`: a shaft's halves side by side",
     "generalize-val-4m-tree-v34.json": "`tree-v34`: a band's bays before its storeys",
     "generalize-val-4m-tree-v35.json": "`tree-v35`: posts from roots called clutter",
     "generalize-val-4m-tall-off.json": "`tree-v35`, the tall-pillar rules off",
-    "generalize-val-4m-tree-v36-final.json": "`tree-v36` without the second draw (the default)",
+    "generalize-val-4m-tree-v36-final.json": "`tree-v36` without the second draw",
 }
 #: Variants judged on tree seeds 0, 1 and 2 (the selection rule from ``tree-v36``,
 #: docs/generalize.md): the name part of their JSONs (``generalize-val-4m-<name>.json`` is
@@ -73,6 +71,7 @@ VAL_SEEDS = {
     "no-redraw": "`tree-v36`, no second draw of close calls (`tree-v32`'s)",
     "check-refit": "rejected: the element check refitted on `tree-v36`'s output",
     "tall-on": "not adopted: `tree-v36` with the tall-pillar rules on (`tree.pillar_max_height=10`)",
+    "group300k": "`tree.max_group_points` 1 M -> 300 k (the default)",
 }
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
 BEGIN = re.compile(r"<!-- generated: ([\w.-]+) -->\n")

@@ -89,7 +89,7 @@ class TreeStageParams(Params, owner="tree"):
         1.5, ge=0, doc="a part classed ground or roof is roof when its median height above the local ground is at "
                        "least this (m); null = HollowNet's class as it is")
     max_group_points: int = param(
-        1_000_000, ge=0,
+        300_000, ge=0,
         check=lambda v: None if v == 0 or v >= MIN_GROUP_SAMPLE else
         f"must be 0 (never sample) or at least {MIN_GROUP_SAMPLE}",
         doc="an element group with more points builds its tree on a seeded sample of this many (0 or at least "
