@@ -8,7 +8,11 @@ fragments (no coarse segment holds half of it) or not cut out (one segment holds
 it and nothing separated it). It prints a table per class and what the wrong classes were.
 
 Run: ``python benchmarks/diagnose_generalize.py out/generalize [--tiny 100] [--json PATH]``;
-``--flips A.json B.json`` compares two such outputs of the same scans (two tile layouts).
+``--flips A.json B.json`` compares two such outputs of the same scans (two tile layouts);
+``--density SPARSE.json ... DENSE.json`` compares outputs of the same sites scanned at
+different densities (store names ``<site>-<points>.zarr``): recall over all elements and
+over those with at least ``--tiny`` points in every scan (a scanner's visibility, not the
+method, decides the rest).
 A tool for the validation split: reading it on test seeds to choose anything breaks the
 protocol of docs/generalize.md.
 """
@@ -77,21 +81,66 @@ def flips(a: list[dict], b: list[dict]) -> list[tuple[dict, dict]]:
             and (r["bucket"] == "found") != (rows[k]["bucket"] == "found")]
 
 
+def _site(store: str) -> str:
+    """``gen-v2-100000-10000000.zarr`` -> ``gen-v2-100000``: a store's site without its point count."""
+    stem = store.removesuffix(".zarr")
+    head, _, tail = stem.rpartition("-")
+    return head if head and tail.isdigit() else stem
+
+
+def density(runs: list[list[dict]], *, tiny: int) -> list[dict[str, int]]:
+    """Recall of each run (``--json``'s ``lost`` rows of the same sites at different
+    densities): ``found`` of ``elements`` (every element of any run; one a scan holds no
+    point of is not found there) and ``found_visible`` of ``visible`` (elements of at least
+    ``tiny`` points in every run)."""
+    rows = [{(_site(r["store"]), r["instance"]): r for r in run} for run in runs]
+    keys = set().union(*rows)
+    visible = {k for k in keys if all(k in x and x[k]["points"] >= tiny for x in rows)}
+    return [{"elements": len(keys), "found": sum(r["bucket"] == "found" for r in x.values()),
+             "visible": len(visible), "found_visible": sum(x[k]["bucket"] == "found" for k in visible)}
+            for x in rows]
+
+
+def _read_lost(ap: argparse.ArgumentParser, flag: str, paths: list[Path]) -> list[list[dict]]:
+    runs = []
+    for p in paths:
+        try:
+            r = json.loads(p.read_text())
+        except (OSError, ValueError) as e:
+            ap.error(f"{flag} {p}: {e}")
+        if not isinstance(r, dict) or "lost" not in r:
+            ap.error(f"{flag} {p}: not a --json output of diagnose_generalize.py (no 'lost' list)")
+        runs.append(r["lost"])
+    return runs
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("paths", nargs="*", type=Path, help="a bench_generalize --work folder or stores")
     ap.add_argument("--flips", nargs=2, type=Path, metavar=("A.json", "B.json"),
                     help="compare two --json outputs of this script on the same scans: elements found "
                          "in one only")
+    ap.add_argument("--density", nargs="+", type=Path, metavar="RUN.json",
+                    help="compare --json outputs of this script on the same sites at different densities "
+                         "(sparsest first): recall over all elements and over those of at least --tiny "
+                         "points in every scan")
     ap.add_argument("--tiny", type=int, default=100, help="elements under this many points are 'tiny'")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
+    if args.density:
+        res = density(_read_lost(ap, "--density", args.density), tiny=args.tiny)
+        print(f"{'run':<40}{'all elements':>22}{f'>= {args.tiny} points in every scan':>36}")
+        for p, r in zip(args.density, res, strict=True):
+            a = f"{r['found']} / {r['elements']} ({100 * r['found'] / max(r['elements'], 1):.1f} %)"
+            v = f"{r['found_visible']} / {r['visible']} ({100 * r['found_visible'] / max(r['visible'], 1):.1f} %)"
+            print(f"{p.stem:<40}{a:>22}{v:>36}")
+        if args.json:
+            args.json.write_text(json.dumps({"tiny": args.tiny, "runs": [{"run": p.stem, **r} for p, r in
+                                                                          zip(args.density, res, strict=True)]},
+                                            indent=1) + "\n")
+        return 0
     if args.flips:
-        runs = [json.loads(p.read_text()) for p in args.flips]
-        for p, r in zip(args.flips, runs, strict=True):
-            if not isinstance(r, dict) or "lost" not in r:
-                ap.error(f"--flips {p}: not a --json output of diagnose_generalize.py (no 'lost' list)")
-        a, b = (r["lost"] for r in runs)
+        a, b = _read_lost(ap, "--flips", args.flips)
         pairs = flips(a, b)
         found = [sum(r["bucket"] == "found" for r in x) for x in (a, b)]
         print(f"elements {len(a)}; found {found[0]} and {found[1]}; found in one run only {len(pairs)} "
@@ -100,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {n:4} {cls}: {x} -> {y}")
         return 0
     if not args.paths:
-        ap.error("name a work folder or stores (or --flips A.json B.json)")
+        ap.error("name a work folder or stores (or --flips A.json B.json, or --density RUN.json ...)")
     stores = []
     for p in args.paths:
         stores += sorted((p / "stores").glob("*.zarr")) if (p / "stores").is_dir() else [p]

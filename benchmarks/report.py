@@ -42,6 +42,9 @@ LATEST = {
     "val-4m": "generalize-val-4m-group300k.json",
     "val-1m": "generalize-val-density-1m-group300k.json",
     "val-10m": "generalize-val-density-10m-group300k.json",
+    "val-3m": "generalize-val-density-3m-group300k.json",
+    # diagnose_generalize.py --density over the 1 M, 3 M and 10 M rows (tree seed 0)
+    "density": "generalize-val-density-visible.json",
     "val": "generalize-val-group300k.json",
     # the latest run with the paper's energy path (other runs pass --no-energy; it runs with
     # tree.verify=false, so tree-v25 and tree-v26 did not change it)
@@ -129,7 +132,7 @@ def generalize_figures() -> str:
     """The headline of issue 43: found and precision per split and density."""
     rows = [("test", "test split"), ("test-5m", "test split, 5 M points"),
             ("val", "validation"), ("val-4m", "validation, 4 M points"), ("val-1m", "validation, 1 M points"),
-            ("val-10m", "validation, 10 M points")]
+            ("val-3m", "validation, 3 M points"), ("val-10m", "validation, 10 M points")]
     out = ["| sites | seeds | points per site | code | arch | dome | minaret | pillar | all found | precision | source |",
            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for key, label in rows:
@@ -139,6 +142,17 @@ def generalize_figures() -> str:
         per = [f"{t[c]['found']} / {t[c]['gt']}" for c in ELEMENTS]
         out.append(f"| {label} | {_seeds(d)} | {_points(d)} | {_code(d)} | " + " | ".join(per)
                    + f" | **{fd} / {gt} ({_pct(fd, gt)})** | **{_pct(m, p)}** | `{LATEST[key]}` |")
+    return "\n".join(out)
+
+
+def density() -> str:
+    """Recall of the same validation sites at 1 M, 3 M and 10 M points, over every element
+    and over those a scan of each density shows with at least ``tiny`` points."""
+    d = _load(LATEST["density"])
+    out = [f"| run | all elements | at least {d['tiny']} points in every scan |", "| --- | --- | --- |"]
+    for r in d["runs"]:
+        out.append(f"| `{r['run']}` | {r['found']} / {r['elements']} ({_pct(r['found'], r['elements'])}) | "
+                   f"{r['found_visible']} / {r['visible']} ({_pct(r['found_visible'], r['visible'])}) |")
     return "\n".join(out)
 
 
@@ -559,6 +573,7 @@ def workflow_keys() -> str:
 GENERATORS: dict[str, Callable[[], str]] = {
     "generalize-figures": generalize_figures,
     "generalize-test": generalize_test,
+    "density": density,
     "small": small,
     "scale-workers": scale_workers,
     "scale-100m": scale_100m,

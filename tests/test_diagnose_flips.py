@@ -1,4 +1,5 @@
-"""``benchmarks/diagnose_generalize.py --flips``: the elements two runs of the same scans disagree on."""
+"""``benchmarks/diagnose_generalize.py --flips`` (the elements two runs of the same scans disagree on)
+and ``--density`` (recall of the same sites at different densities)."""
 
 from __future__ import annotations
 
@@ -6,14 +7,16 @@ import importlib.util
 import json
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 _spec = importlib.util.spec_from_file_location("hollowtree_diagnose", REPO / "benchmarks" / "diagnose_generalize.py")
 diagnose = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(diagnose)
 
 
-def _row(store: str, inst: int, bucket: str) -> dict:
-    return {"store": store, "instance": inst, "class": "arch", "bucket": bucket}
+def _row(store: str, inst: int, bucket: str, points: int = 1000) -> dict:
+    return {"store": store, "instance": inst, "class": "arch", "bucket": bucket, "points": points}
 
 
 def test_flips_are_the_elements_found_in_one_run_only(tmp_path, capsys):
@@ -28,3 +31,32 @@ def test_flips_are_the_elements_found_in_one_run_only(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "found 2 and 2; found in one run only 2 (50.0 %)" in out
     assert "arch: found -> coarse fragments" in out
+
+
+def test_density_counts_elements_visible_in_every_scan(tmp_path, capsys):
+    sparse = [_row("gen-v2-100000-1000000.zarr", 1, "found", 400), _row("gen-v2-100000-1000000.zarr", 2, "tiny", 30),
+              _row("gen-v2-100001-1000000.zarr", 1, "not cut out", 150)]
+    dense = [_row("gen-v2-100000-10000000.zarr", 1, "found", 4000), _row("gen-v2-100000-10000000.zarr", 2, "found", 300),
+             _row("gen-v2-100001-10000000.zarr", 1, "found", 1500),
+             _row("gen-v2-100001-10000000.zarr", 3, "found", 120)]  # no point of it in the sparse scan
+    res = diagnose.density([sparse, dense], tiny=100)
+    assert res == [{"elements": 4, "found": 1, "visible": 2, "found_visible": 1},
+                   {"elements": 4, "found": 4, "visible": 2, "found_visible": 2}]
+    assert diagnose._site("gen-v2-100000-1000000.zarr") == "gen-v2-100000"
+    assert diagnose._site("plain.zarr") == "plain"
+    paths = []
+    for name, rows in (("1m", sparse), ("10m", dense)):
+        paths.append(tmp_path / f"{name}.json")
+        paths[-1].write_text(json.dumps({"lost": rows, "false_positives": []}))
+    assert diagnose.main(["--density", *map(str, paths), "--json", str(tmp_path / "d.json")]) == 0
+    assert "1 / 2 (50.0 %)" in capsys.readouterr().out
+    assert json.loads((tmp_path / "d.json").read_text())["runs"][1]["found_visible"] == 2
+
+
+def test_density_names_a_file_that_is_not_a_diagnosis(tmp_path, capsys):
+    bad = tmp_path / "bad.json"
+    bad.write_text("[1, 2]")
+    with pytest.raises(SystemExit) as e:
+        diagnose.main(["--density", str(bad)])
+    assert e.value.code == 2
+    assert "--density " + str(bad) + ": not a --json output" in capsys.readouterr().err
