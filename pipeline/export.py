@@ -104,7 +104,7 @@ def _out_header(sources: list[dict[str, Any]]) -> laspy.LasHeader:
         # the user's own records, not those this writer makes (CRS, extra bytes, class names)
         header.vlrs.extend(v for v in src.vlrs if not _remade(v))
         header.evlrs = [v for v in (src.evlrs or []) if not _remade(v)] or None
-        crs = las_crs(src, first["path"])
+        crs = las_crs(src, first["path"], writing="the labelled copy")
         if crs is not None:
             header.add_crs(crs)
         if "classification" in src.point_format.dimension_names and \

@@ -605,7 +605,19 @@ def test_an_empty_crs_vlr_is_no_crs_in_ingest_and_export(tmp_path, source, caplo
         header = _out_header([info.to_dict()])
     assert header.parse_crs() is None
     assert any("CRS VLR could not be parsed" in r.getMessage() and str(path) in r.getMessage()
-               for r in caplog.records)
+               and "the labelled copy has no CRS" in r.getMessage() for r in caplog.records)
+
+
+def test_a_broken_crs_vlr_is_reported_once_per_file_while_reading(tmp_path, caplog):
+    """A run reads a header more than once (probe, ingest): one warning per file."""
+    a, b = _las_with_empty_wkt(tmp_path / "a.las"), _las_with_empty_wkt(tmp_path / "b.las")
+    with caplog.at_level("WARNING"):
+        for p in (a, b, a, b):
+            assert probe(p).crs_wkt is None
+        assert sum(1 for _ in read_blocks(a)) >= 1
+    said = [r.getMessage() for r in caplog.records if "CRS VLR could not be parsed" in r.getMessage()]
+    assert [str(a) in m for m in said] == [True, False]
+    assert all("taken as no CRS" in m for m in said)
 
 
 def test_autzen_in_feet_runs_in_metres_and_is_called_sparse(tmp_path):

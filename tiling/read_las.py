@@ -36,14 +36,24 @@ def _las_header_checks(p: Path, h: laspy.LasHeader) -> None:
                                     f"({need} bytes) but the file has {size} bytes")
 
 
-def las_crs(header: laspy.LasHeader, path: str | Path) -> Any:
+#: Inputs whose broken CRS VLR this process has warned about while reading: a run reads a
+#: file's header more than once (probe, ingest) and says so once.
+_WARNED_CRS: set[str] = set()
+
+
+def las_crs(header: laspy.LasHeader, path: str | Path, *, writing: str | None = None) -> Any:
     """The CRS of a LAS header (a ``pyproj.CRS``), or None when it has none, or (with a
     warning naming ``path``) when its CRS VLR is empty or broken, as in a WKT VLR that
-    holds ``''``: a scan without a readable CRS is still a scan."""
+    holds ``''``: a scan without a readable CRS is still a scan. Reading, the warning is
+    given once per file and process; ``writing`` (what gets no CRS) warns every time."""
     try:
         return header.parse_crs()
     except Exception as e:  # pyproj's CRSError, laspy's errors: a broken VLR is not a reason to stop  # noqa: BLE001
-        logger.warning("%s: CRS VLR could not be parsed (%s); taken as no CRS", path, e)
+        if writing is not None:
+            logger.warning("%s: CRS VLR could not be parsed (%s); %s has no CRS", path, e, writing)
+        elif str(path) not in _WARNED_CRS:
+            _WARNED_CRS.add(str(path))
+            logger.warning("%s: CRS VLR could not be parsed (%s); taken as no CRS", path, e)
         return None
 
 
