@@ -56,8 +56,6 @@ LATEST = {
 #: What each validation variant of docs/decisions/method.md was (``generalize-val-4m*.json``;
 #: its 0.5-2 M twin, where there is one, is the same name without ``-4m``).
 VAL_VARIANTS = {
-    "generalize-val-4m.json": "`tree-v16` on `gen-v1` (the first baseline)",
-    "generalize-val-4m-tree-v30.json": "`tree-v30` on `gen-v1` (its last)",
     "generalize-val-4m-gen-v2.json": "`tree-v30` on `gen-v2` (sites turned)",
     "generalize-val-4m-tree-v32.json": "`tree-v32`: a close call judged by two draws",
     "generalize-val-4m-tree-v34.json": "`tree-v34`: a band's bays before its storeys",
