@@ -43,6 +43,8 @@ LATEST = {
     "val-1m": "generalize-val-density-1m-group300k.json",
     "val-10m": "generalize-val-density-10m-group300k.json",
     "val-3m": "generalize-val-density-3m-group300k.json",
+    # the second validation batch (seeds 100 014-100 027) at the hidden scenes' density
+    "val-5m-b": "generalize-val-5m-b.json",
     # diagnose_generalize.py --density over the 1 M, 3 M and 10 M rows (tree seed 0)
     "density": "generalize-val-density-visible.json",
     "val": "generalize-val-group300k.json",
@@ -56,8 +58,6 @@ LATEST = {
 #: What each validation variant of docs/decisions/method.md was (``generalize-val-4m*.json``;
 #: its 0.5-2 M twin, where there is one, is the same name without ``-4m``).
 VAL_VARIANTS = {
-    "generalize-val-4m-gen-v2.json": "`tree-v30` on `gen-v2` (sites turned)",
-    "generalize-val-4m-tree-v32.json": "`tree-v32`: a close call judged by two draws",
     "generalize-val-4m-tree-v34.json": "`tree-v34`: a band's bays before its storeys",
     "generalize-val-4m-tree-v35.json": "`tree-v35`: posts from roots called clutter",
     "generalize-val-4m-tall-off.json": "`tree-v35`, the tall-pillar rules off",
@@ -73,6 +73,7 @@ VAL_SEEDS = {
     "check-refit": "rejected: the element check refitted on `tree-v36`'s output",
     "tall-on": "not adopted: `tree-v36` with the tall-pillar rules on (`tree.pillar_max_height=10`)",
     "group300k": "`tree.max_group_points` 1 M -> 300 k (the default)",
+    "coarse-cut": "rejected: S2 and S3 also offer the cut at their most prominent peak",
 }
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
 BEGIN = re.compile(r"<!-- generated: ([\w.-]+) -->\n")
@@ -130,7 +131,8 @@ def generalize_figures() -> str:
     """The headline of issue 43: found and precision per split and density."""
     rows = [("test", "test split"), ("test-5m", "test split, 5 M points"),
             ("val", "validation"), ("val-4m", "validation, 4 M points"), ("val-1m", "validation, 1 M points"),
-            ("val-3m", "validation, 3 M points"), ("val-10m", "validation, 10 M points")]
+            ("val-3m", "validation, 3 M points"), ("val-10m", "validation, 10 M points"),
+            ("val-5m-b", "validation, second batch, 5 M points")]
     out = ["| sites | seeds | points per site | code | arch | dome | minaret | pillar | all found | precision | source |",
            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for key, label in rows:
