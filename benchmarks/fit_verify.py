@@ -18,9 +18,9 @@ precision per threshold, so the thresholds are chosen on validation seeds. It ig
 that a rejected arch no longer joins an arcade row, so the chosen threshold is checked
 with a real run.
 
-Run: ``python benchmarks/fit_verify.py fit out/gen-train --out tree/data/verify-v1.json
+Run: ``python benchmarks/fit_verify.py fit out/gen-train --out tree/data/verify-v2.json
 --threshold T [--class-threshold pillar=0.4 ...]`` and ``python benchmarks/fit_verify.py sweep out/gen-val4m --model
-tree/data/verify-v1.json``.
+tree/data/verify-v2.json``.
 """
 
 from __future__ import annotations

@@ -37,17 +37,17 @@ RESULTS = REPO / "benchmarks" / "results"
 #: The latest run of each kind of element-recall result (``bench_generalize.py --json``).
 #: These are the figures of docs/generalize.md; edit the file names when a newer run replaces one.
 LATEST = {
-    "test": "generalize-test-group300k.json",
-    "test-5m": "generalize-test-5m-group300k.json",
-    "val-4m": "generalize-val-4m-group300k.json",
-    "val-1m": "generalize-val-density-1m-group300k.json",
-    "val-10m": "generalize-val-density-10m-group300k.json",
-    "val-3m": "generalize-val-density-3m-group300k.json",
+    "test": "generalize-test-shape-check.json",
+    "test-5m": "generalize-test-5m-shape-check.json",
+    "val-4m": "generalize-val-4m-shape-check.json",
+    "val-1m": "generalize-val-density-1m-shape-check.json",
+    "val-10m": "generalize-val-density-10m-shape-check.json",
+    "val-3m": "generalize-val-density-3m-shape-check.json",
     # the second validation batch (seeds 100 014-100 027) at the hidden scenes' density
-    "val-5m-b": "generalize-val-5m-b.json",
+    "val-5m-b": "generalize-val-5m-b-shape-check.json",
     # diagnose_generalize.py --density over the 1 M, 3 M and 10 M rows (tree seed 0)
-    "density": "generalize-val-density-visible.json",
-    "val": "generalize-val-group300k.json",
+    "density": "generalize-val-density-visible-shape-check.json",
+    "val": "generalize-val-shape-check.json",
     # the latest run with the paper's energy path (other runs pass --no-energy; it runs with
     # tree.verify=false, so tree-v25 and tree-v26 did not change it)
     "test-energy": "generalize-test-group300k.json",
@@ -58,8 +58,6 @@ LATEST = {
 #: What each validation variant of docs/decisions/method.md was (``generalize-val-4m*.json``;
 #: its 0.5-2 M twin, where there is one, is the same name without ``-4m``).
 VAL_VARIANTS = {
-    "generalize-val-4m-tree-v34.json": "`tree-v34`: a band's bays before its storeys",
-    "generalize-val-4m-tree-v35.json": "`tree-v35`: posts from roots called clutter",
     "generalize-val-4m-tall-off.json": "`tree-v35`, the tall-pillar rules off",
     "generalize-val-4m-tree-v36-final.json": "`tree-v36` without the second draw",
 }
@@ -67,13 +65,11 @@ VAL_VARIANTS = {
 #: docs/generalize.md): the name part of their JSONs (``generalize-val-4m-<name>.json`` is
 #: seed 0, ``...-<name>-seed1.json`` seed 1, ...), in the order they were run.
 VAL_SEEDS = {
-    "tall-off": "`tree-v35`, tall-pillar rules off",
-    "tree-v36": "`tree-v36`: the circle settled on the cells",
-    "no-redraw": "`tree-v36`, no second draw of close calls (`tree-v32`'s)",
     "check-refit": "rejected: the element check refitted on `tree-v36`'s output",
     "tall-on": "not adopted: `tree-v36` with the tall-pillar rules on (`tree.pillar_max_height=10`)",
-    "group300k": "`tree.max_group_points` 1 M -> 300 k (the default)",
+    "group300k": "`tree.max_group_points` 1 M -> 300 k",
     "coarse-cut": "rejected: S2 and S3 also offer the cut at their most prominent peak",
+    "shape-check": "`tree-v37`: the element check with its points' shape (the default)",
 }
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
 BEGIN = re.compile(r"<!-- generated: ([\w.-]+) -->\n")

@@ -47,6 +47,7 @@ from hollowtree.threads import task_threads
 from hollowtree.tiling.stage import Stage, params_hash
 from hollowtree.tiling.store import CHUNK_POINTS, RunStore
 from hollowtree.tree.tall import short_minarets, size_rules, slender_domes
+from hollowtree.tree.verify import SHAPE_FEATURES, local_shape
 
 __all__ = ["TreeStageParams", "tree_batch", "run_tree", "TreeReport", "plan_batches", "group_starts"]
 
@@ -55,7 +56,7 @@ SPREAD_STAGE = "tree.spread"
 #: Version of the tree's algorithm (tree/): part of the stage's parameters hash and of the
 #: workflow parameters a run records, so a store made by an older version is redone. What
 #: each version changed is in CHANGELOG.md (and git).
-TREE_ALGORITHM = "tree-v36"
+TREE_ALGORITHM = "tree-v37"
 #: Points sampled from each wall instance for the frames (tree/frames.py): a pier's face
 #: beside a bay's jamb is a strip a few tenths of a metre wide in a facade's wall.
 WALL_SAMPLE_POINTS = 16384
@@ -145,7 +146,7 @@ def _load_classifier(weights: str | None, device: str = "cpu") -> None:
 _PLANAR = np.array([int(c) for c in PLANAR_CLASSES], dtype=np.uint8)
 _NODE_COLUMNS = ("segment", "node_id", "parent", "depth", "sequence", "e1", "e2", "e3", "e4", "e5", "xi",
                  "class_id", "score", "n_points", "xmin", "ymin", "zmin", "xmax", "ymax", "zmax",
-                 "is_leaf", "instance")
+                 "is_leaf", "instance", *SHAPE_FEATURES)
 
 
 _BOX = ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax")
@@ -216,9 +217,18 @@ def _group_tree(pts: np.ndarray, s: int, params: TreeStageParams, clf: Any, grou
         inst[planar & (res_class == c)] = n_inst
     d = res.nodes.to_dict()
     m = len(res.nodes)
+    # The element check's shape features (tree/verify.py) of every instance node's points.
+    shape = np.full((m, len(SHAPE_FEATURES)), np.nan)
+    if len(res.instance_node):
+        order = np.argsort(res.instance, kind="stable")
+        ends = np.searchsorted(res.instance[order], np.arange(len(res.instance_node) + 2))
+        for i, node in enumerate(res.instance_node.tolist()):
+            shape[node] = local_shape(pts[order[ends[i + 1]:ends[i + 2]]])
     cols: dict[str, list[Any]] = {"segment": [s + 1] * m}
     for c in _NODE_COLUMNS[1:]:
-        if c == "instance":
+        if c in SHAPE_FEATURES:
+            cols[c] = shape[:, SHAPE_FEATURES.index(c)].tolist()
+        elif c == "instance":
             cols[c] = node_inst.tolist()
         elif c == "class_id":
             cols[c] = node_class.tolist()
@@ -579,8 +589,11 @@ def element_instances(nodes: pa.Table, imap: np.ndarray, cmap: np.ndarray,
     known = (seg >= 1) & (seg <= len(ground))
     g = np.full(len(seg), np.nan)
     g[known] = ground[seg[known] - 1]
+    names = set(nodes.column_names)
+    shape = (np.column_stack([np.asarray(nodes.column(c).to_numpy(), dtype=np.float64) for c in SHAPE_FEATURES])
+             if names.issuperset(SHAPE_FEATURES) else None)
     return instance_features(np.where(inst > 0, imap[inst], 0), cls, col["score"], col["n_points"],
-                             np.column_stack([col[c] for c in _BOX]), col["depth"], seg, g)
+                             np.column_stack([col[c] for c in _BOX]), col["depth"], seg, g, shape)
 
 
 def _check_fingerprint(params: TreeStageParams) -> str | None:

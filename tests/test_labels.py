@@ -521,15 +521,22 @@ def test_the_element_checks_decision_reaches_labels(tmp_path, scan):
     none makes them other; points in no element instance keep their class. The check runs
     by default (``tree.verify`` unset)."""
     from hollowtree.classes import ELEMENT_CLASSES
-    from hollowtree.tree.verify import VERIFY_FEATURES, ElementCheck, VerifyModel
+    from hollowtree.tree.verify import SHAPE_FEATURES, VERIFY_FEATURES, ElementCheck, VerifyModel
 
     leaf = {"feature": np.array([-2]), "threshold": np.array([0.0]), "left": np.array([-1]),
             "right": np.array([-1]), "value": np.array([0.0])}
     yes, no = (VerifyModel(init=v, learning_rate=0.1, trees=(leaf,)) for v in (4.0, -4.0))
     assert len(VERIFY_FEATURES) == len(yes.feature_names)
-    _, off = _run(tmp_path / "off", scan, tree="{enabled: true, max_depth: 1, verify: false}")
+    store, off = _run(tmp_path / "off", scan, tree="{enabled: true, max_depth: 1, verify: false}")
     elements = (off["instance"] > 0) & np.isin(off["class"], [int(c) for c in ELEMENT_CLASSES])
     assert elements.any()
+    # every instance node carries its points' shape (the check's SHAPE_FEATURES)
+    nodes = store.read_table("tree/nodes.parquet")
+    node_inst = np.asarray(nodes.column("instance").to_numpy())
+    shape = np.column_stack([np.asarray(nodes.column(c).to_numpy(), dtype=float) for c in SHAPE_FEATURES])
+    assert (node_inst > 0).any()
+    assert np.isfinite(shape[node_inst > 0]).all()
+    assert np.isnan(shape[node_inst == 0]).all()
     for believed, want in (({4: no, 5: no, 6: no, 7: yes}, ClassId.PILLAR), ({4: no, 5: no, 6: no, 7: no},
                                                                               ClassId.OTHER)):
         path = tmp_path / f"check-{want.label}.json"

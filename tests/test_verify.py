@@ -10,11 +10,13 @@ import pytest
 from hollowtree.classes import ClassId
 from hollowtree.tree.verify import (
     DEFAULT_VERIFY_PATH,
+    SHAPE_FEATURES,
     VERIFY_FEATURES,
     ElementCheck,
     VerifyModel,
     instance_features,
     load_verify_model,
+    local_shape,
 )
 
 LEAF = {"feature": np.array([-2]), "threshold": np.array([0.0]), "left": np.array([-1]), "right": np.array([-1]),
@@ -47,6 +49,59 @@ def test_features_of_a_merged_instance_cover_all_its_nodes() -> None:
     assert row["base_above_ground"] == pytest.approx(1.0)
     assert row["top_above_ground"] == pytest.approx(29.0)
     assert (row["n_nodes"], row["n_segments"], row["min_depth"]) == (2.0, 1.0, 1.0)
+
+
+def test_shape_features_are_the_point_weighted_mean_of_known_nodes() -> None:
+    # Instance 4: nodes of 100 and 300 points with shapes, a third (unknown shape) ignored;
+    # instance 6 has no known shape: -1 in every shape column.
+    shape = np.array([[0.2] * 6, [0.6] * 6, [np.nan] * 6, [np.nan] * 6])
+    ids, _, f = instance_features(
+        instance=[4, 4, 4, 6], class_id=[6, 6, 6, 5], score=[1.0] * 4, n_points=[100, 300, 50, 80],
+        bbox=[[0, 0, 0, 1, 1, 1]] * 4, depth=[1] * 4, segment=[1] * 4, ground=[0.0] * 4, shape=shape)
+    assert ids.tolist() == [4, 6]
+    at = [VERIFY_FEATURES.index(n) for n in SHAPE_FEATURES]
+    assert f[0, at] == pytest.approx([0.5] * 6)
+    assert f[1, at].tolist() == [-1.0] * 6
+    _, _, without = instance_features([4], [6], [1.0], [10], [[0, 0, 0, 1, 1, 1]], [1], [1], [0.0])
+    assert without[0, at].tolist() == [-1.0] * 6
+
+
+def test_local_shape_tells_tubes_from_surfaces_at_any_density() -> None:
+    rng = np.random.default_rng(0)
+    wall = lambda n: np.c_[rng.uniform(0, 3, n), rng.normal(0, 0.002, n), rng.uniform(0, 4, n)]  # noqa: E731
+    crate_top = np.c_[rng.uniform(0, 1, 20_000), rng.uniform(0, 1, 20_000), np.full(20_000, 0.8)]
+    # a scaffold's bay: four poles and two rails, tubes 5 cm across
+    t = rng.uniform(0, 1, 40_000)
+    a = rng.uniform(0, 2 * np.pi, 40_000)
+    ring = 0.024 * np.c_[np.cos(a), np.sin(a)]
+    poles = [np.c_[x + ring[:, 0], y + ring[:, 1], 4 * t] for x, y in ((0, 0), (2, 0), (0, 1), (2, 1))]
+    rails = [np.c_[2 * t, y + ring[:, 0], z + ring[:, 1]] for y, z in ((0, 2), (1, 2))]
+    names = {n: i for i, n in enumerate(SHAPE_FEATURES)}
+    dense, sparse, scaffold, top = (local_shape(p) for p in (wall(200_000), wall(30_000), np.vstack(poles + rails),
+                                                             crate_top))
+    assert dense[names["vertical_share"]] > 0.95
+    assert top[names["horizontal_share"]] > 0.95
+    assert dense[names["planarity"]] > 0.6 > scaffold[names["planarity"]]
+    assert scaffold[names["linearity"]] > 0.5 > dense[names["linearity"]]
+    assert scaffold[names["scattering"]] > 0.1 > dense[names["scattering"]]
+    np.testing.assert_allclose(dense, sparse, atol=0.08)  # thinned to one point per 3 cm cell
+    assert np.array_equal(local_shape(wall(5)), np.full(len(SHAPE_FEATURES), np.nan, dtype=float), equal_nan=True)
+    assert np.isnan(local_shape(np.zeros((0, 3)))).all()
+
+
+def test_a_check_fitted_without_shape_features_still_decides() -> None:
+    """A file fitted on the columns before SHAPE_FEATURES (the first check's) reads those
+    columns of the full feature matrix."""
+    old = VERIFY_FEATURES[:-len(SHAPE_FEATURES)]
+    tree = {"feature": np.array([old.index("score"), -2, -2]), "threshold": np.array([0.5, 0.0, 0.0]),
+            "left": np.array([1, -1, -1]), "right": np.array([2, -1, -1]), "value": np.array([0.0, -3.0, 3.0])}
+    model = VerifyModel(init=0.0, learning_rate=1.0, trees=(tree,), feature_names=old)
+    no = VerifyModel(init=-4.0, learning_rate=0.1, trees=(LEAF,))
+    check = ElementCheck.from_dict(ElementCheck({4: no, 5: no, 6: model, 7: no}).to_dict())
+    f = np.zeros((2, len(VERIFY_FEATURES)))
+    f[:, -len(SHAPE_FEATURES):] = 9.0
+    f[1, VERIFY_FEATURES.index("score")] = 0.9
+    assert check.decide(f).tolist() == [int(ClassId.OTHER), int(ClassId.MINARET)]
 
 
 def test_unknown_ground_is_the_instance_base() -> None:

@@ -162,7 +162,7 @@ class SplitModel:
     def __post_init__(self) -> None:
         if not self.feature_names:
             object.__setattr__(self, "feature_names", self.FEATURES)
-        if tuple(self.feature_names) != self.FEATURES:
+        if not self._known_features(tuple(self.feature_names)):
             raise ValueError(f"this {type(self).__name__} was made for other features "
                              f"({len(self.feature_names)} columns); {self.REFIT}")
         # All trees as one set of arrays (children as global node indices), walked together.
@@ -179,6 +179,11 @@ class SplitModel:
                 "left": np.where(left >= 0, left + shift, -1), "right": np.where(right >= 0, right + shift, -1),
                 "value": cat("value", np.float64), "roots": offsets[:-1]}
         object.__setattr__(self, "_flat", flat)
+
+    @classmethod
+    def _known_features(cls, names: tuple[str, ...]) -> bool:
+        """Whether a model of these feature columns can be used (here: exactly :attr:`FEATURES`)."""
+        return names == cls.FEATURES
 
     def probability(self, x: npt.ArrayLike) -> FloatArray:
         """P(right) for each row of ``x`` (shape (n, n_features) or (n_features,)).

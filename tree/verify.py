@@ -36,32 +36,96 @@ from hollowtree.classes import ELEMENT_CLASSES, ClassId, class_id
 from hollowtree.errors import ConfigError
 from hollowtree.tree.split import SplitModel
 
-__all__ = ["DEFAULT_VERIFY_PATH", "VERIFY_FEATURES", "ElementCheck", "VerifyModel", "instance_features",
-           "load_verify_model"]
+__all__ = ["DEFAULT_VERIFY_PATH", "SHAPE_FEATURES", "VERIFY_FEATURES", "ElementCheck", "VerifyModel",
+           "instance_features", "load_verify_model", "local_shape"]
 
 #: The element check shipped with the package.
-DEFAULT_VERIFY_PATH = Path(__file__).resolve().parent / "data" / "verify-v1.json"
+DEFAULT_VERIFY_PATH = Path(__file__).resolve().parent / "data" / "verify-v2.json"
 
 _ELEMENTS = tuple(int(c) for c in ELEMENT_CLASSES)
+
+#: The local shape of an instance's points (:func:`local_shape`), in order: the mean
+#: linearity, planarity and scattering of the points' neighbourhoods, the mean |z| of their
+#: normals, and the shares of points on horizontal and on vertical surfaces.
+SHAPE_FEATURES: tuple[str, ...] = ("linearity", "planarity", "scattering", "normal_z", "horizontal_share",
+                                   "vertical_share")
 
 #: Names of the columns of :func:`instance_features`, in order.
 VERIFY_FEATURES: tuple[str, ...] = (
     *(f"is_{c.label}" for c in ELEMENT_CLASSES), "score", "log10_points", "log10_height", "log10_long",
     "log10_short", "footprint_ratio", "base_above_ground", "top_above_ground", "n_nodes", "n_segments",
-    "min_depth",
+    "min_depth", *SHAPE_FEATURES,
 )
+
+#: :func:`local_shape`: the grid the points are thinned on (metres; a scan's density no
+#: longer matters above it), the neighbours of a point and the points sampled per instance.
+SHAPE_VOXEL = 0.03
+SHAPE_NEIGHBOURS = 16
+SHAPE_SAMPLE = 1500
 
 
 class VerifyModel(SplitModel):
-    """Gradient-boosted trees giving P(instance is an element of its class | features)."""
+    """Gradient-boosted trees giving P(instance is an element of its class | features);
+    fitted on :data:`VERIFY_FEATURES`, or on its columns before :data:`SHAPE_FEATURES` (a
+    check fitted before those existed keeps working)."""
 
     FEATURES: ClassVar[tuple[str, ...]] = VERIFY_FEATURES
     REFIT: ClassVar[str] = "refit it with benchmarks/fit_verify.py"
+
+    @classmethod
+    def _known_features(cls, names: tuple[str, ...]) -> bool:
+        return names in (cls.FEATURES, cls.FEATURES[:-len(SHAPE_FEATURES)])
+
+    def columns(self) -> IntArray:
+        """The columns of :data:`VERIFY_FEATURES` the model reads, in its order."""
+        return np.asarray([VERIFY_FEATURES.index(n) for n in self.feature_names], dtype=np.int64)
+
+
+def local_shape(xyz: npt.ArrayLike) -> FloatArray:
+    """:data:`SHAPE_FEATURES` of one instance's points (metres; NaN for fewer than
+    :data:`SHAPE_NEIGHBOURS` + 1 points after thinning).
+
+    The points are thinned to one per :data:`SHAPE_VOXEL` cell, so a dense and a sparse
+    scan of one shape agree; at most :data:`SHAPE_SAMPLE` of them, evenly spaced in cell
+    order, get the covariance of their :data:`SHAPE_NEIGHBOURS` nearest thinned points,
+    with eigenvalues l1 >= l2 >= l3: linearity (l1 - l2) / l1 (a scaffold's tubes, a
+    railing), planarity (l2 - l3) / l1 (a wall, a shaft, a dome), scattering l3 / l1 (a
+    crown, a bush) and the normal (the smallest one's vector): a column shows vertical
+    surfaces, a crate or a bench horizontal ones too. Deterministic.
+
+    >>> g = np.mgrid[0:2:0.02, 0:3:0.02].reshape(2, -1).T
+    >>> wall = np.c_[g[:, 0], np.zeros(len(g)), g[:, 1]]
+    >>> dict(zip(SHAPE_FEATURES, local_shape(wall).round(2).tolist()))["vertical_share"]
+    1.0
+    >>> pole = np.c_[np.zeros(300), np.zeros(300), np.linspace(0, 6, 300)]
+    >>> round(float(local_shape(pole)[0]), 2)
+    1.0
+    """
+    from scipy.spatial import cKDTree
+
+    p = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    if len(p):
+        cells = np.floor((p - p.min(axis=0)) / SHAPE_VOXEL).astype(np.int64)
+        dims = cells.max(axis=0) + 1
+        _, first = np.unique((cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2], return_index=True)
+        p = p[np.sort(first)]
+    k = SHAPE_NEIGHBOURS
+    if len(p) <= k:
+        return np.full(len(SHAPE_FEATURES), np.nan)
+    q = p[np.linspace(0, len(p) - 1, min(SHAPE_SAMPLE, len(p))).astype(np.int64)]
+    _, nb = cKDTree(p).query(q, k=k)
+    d = p[nb] - p[nb].mean(axis=1, keepdims=True)
+    w, vec = np.linalg.eigh(np.einsum("nki,nkj->nij", d, d) / k)
+    l3, l2, l1 = np.maximum(w[:, 0], 0.0), np.maximum(w[:, 1], 0.0), np.maximum(w[:, 2], 1e-12)
+    nz = np.abs(vec[:, 2, 0])
+    return np.array([np.mean((l1 - l2) / l1), np.mean((l2 - l3) / l1), np.mean(l3 / l1), nz.mean(),
+                     np.mean(nz > 0.85), np.mean(nz < 0.3)])
 
 
 def instance_features(
     instance: npt.ArrayLike, class_id: npt.ArrayLike, score: npt.ArrayLike, n_points: npt.ArrayLike,
     bbox: npt.ArrayLike, depth: npt.ArrayLike, segment: npt.ArrayLike, ground: npt.ArrayLike,
+    shape: npt.ArrayLike | None = None,
 ) -> tuple[IntArray, IntArray, FloatArray]:
     """The features (:data:`VERIFY_FEATURES`) of every element instance, from its tree nodes.
 
@@ -75,6 +139,9 @@ def instance_features(
         Each node's box (xmin, ymin, zmin, xmax, ymax, zmax), metres.
     ground : array-like of float, shape (n_nodes,)
         The local ground level under each node (NaN: unknown; then the instance's base).
+    shape : array-like of float, shape (n_nodes, len(SHAPE_FEATURES)), optional
+        Each node's :func:`local_shape` (NaN: unknown); an instance takes the mean over its
+        nodes weighted by their points, -1 where none is known (and for all without it).
 
     Returns
     -------
@@ -101,6 +168,9 @@ def instance_features(
     dep = np.asarray(depth, dtype=np.float64).reshape(-1)[keep]
     seg = np.asarray(segment, dtype=np.int64).reshape(-1)[keep]
     gr = np.asarray(ground, dtype=np.float64).reshape(-1)[keep]
+    nsh = len(SHAPE_FEATURES)
+    sh = (np.full((len(inst), nsh), np.nan) if shape is None
+          else np.asarray(shape, dtype=np.float64).reshape(-1, nsh)[keep])
     ids, first, at = np.unique(inst, return_index=True, return_inverse=True)
     m = len(ids)
     total = np.bincount(at, weights=npts, minlength=m)
@@ -121,13 +191,19 @@ def instance_features(
     min_depth = np.full(m, np.inf)
     np.minimum.at(min_depth, at, dep)
     onehot = (cls[first][:, None] == np.asarray(_ELEMENTS)[None, :]).astype(np.float64)
+    known = np.isfinite(sh).all(axis=1)
+    wsum = np.bincount(at[known], weights=npts[known], minlength=m)
+    shape_mean = np.full((m, nsh), -1.0)
+    for j in range(nsh):
+        col = np.bincount(at[known], weights=npts[known] * sh[known, j], minlength=m)
+        shape_mean[:, j] = np.where(wsum > 0, col / np.maximum(wsum, 1e-12), -1.0)
 
     def log10(v: FloatArray) -> FloatArray:
         return np.log10(v + 1e-3)
 
     f = np.column_stack([onehot, mean_score, np.log10(np.maximum(total, 1.0)), log10(ext[:, 2]), log10(long),
                          log10(short), short / np.maximum(long, 1e-3), lo[:, 2] - g, hi[:, 2] - g, n_nodes, n_segs,
-                         min_depth])
+                         min_depth, shape_mean])
     return ids, cls[first], f
 
 
@@ -149,8 +225,8 @@ class ElementCheck:
     def probabilities(self, features: npt.ArrayLike) -> FloatArray:
         """P(element of class) per row of ``features``, one column per :data:`_ELEMENTS` class."""
         f = np.atleast_2d(np.asarray(features, dtype=np.float64))
-        return np.column_stack([self.models[c].probability(f) if c in self.models else np.zeros(len(f))
-                                for c in _ELEMENTS]) if len(f) else np.zeros((0, len(_ELEMENTS)))
+        return np.column_stack([self.models[c].probability(f[:, self.models[c].columns()]) if c in self.models
+                                else np.zeros(len(f)) for c in _ELEMENTS]) if len(f) else np.zeros((0, len(_ELEMENTS)))
 
     def decide(self, features: npt.ArrayLike) -> IntArray:
         """The class of each instance: the most probable element class, or ``other``
@@ -192,7 +268,7 @@ class ElementCheck:
 
 
 def load_verify_model(path: str | Path | None = None) -> ElementCheck:
-    """Read an element check; the package's ``verify-v1.json`` by default (read once per process)."""
+    """Read an element check; the package's ``verify-v2.json`` by default (read once per process)."""
     return _load(str(DEFAULT_VERIFY_PATH if path is None else Path(path).resolve()))
 
 
