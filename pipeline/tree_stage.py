@@ -432,7 +432,7 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any, device: str = "c
     coarse = stages.get("coarse", {})
     if not coarse or coarse.get("done") != coarse.get("units"):
         raise PipelineError(f"store {url}: the coarse stage is not complete; run it first")
-    h = params_hash([params.to_dict(), coarse["params_hash"], TREE_ALGORITHM, _check_fingerprint(params)])
+    h = params_hash([params.to_dict(), coarse["params_hash"], TREE_ALGORITHM, check_fingerprint(params)])
     cfg = {"params": params.to_dict(), "params_hash": h, "device": device}
     stage = Stage(store, STAGE, h, unit_stages=(SPREAD_STAGE,))
     completed = stage.last.get("params_hash") == h
@@ -596,7 +596,7 @@ def element_instances(nodes: pa.Table, imap: np.ndarray, cmap: np.ndarray,
                              np.column_stack([col[c] for c in _BOX]), col["depth"], seg, g, shape)
 
 
-def _check_fingerprint(params: TreeStageParams) -> str | None:
+def check_fingerprint(params: TreeStageParams) -> str | None:
     """What the element check's file holds (a hash), so a store reruns its tree when the
     check changes under the same path; None when the check is off."""
     import hashlib

@@ -547,6 +547,27 @@ def test_the_element_checks_decision_reaches_labels(tmp_path, scan):
         np.testing.assert_array_equal(checked["class"][~elements], off["class"][~elements])
 
 
+def test_a_check_refitted_under_the_same_path_redoes_the_tree(tmp_path, scan):
+    """A rerun after the element check's file changed in place (a refit written over it)
+    is not 'nothing to do': the tree stage runs again and the labels follow the new check."""
+    from hollowtree.classes import ELEMENT_CLASSES
+    from hollowtree.tree.verify import ElementCheck, VerifyModel
+
+    leaf = {"feature": np.array([-2]), "threshold": np.array([0.0]), "left": np.array([-1]),
+            "right": np.array([-1]), "value": np.array([0.0])}
+    yes, no = (VerifyModel(init=v, learning_rate=0.1, trees=(leaf,)) for v in (4.0, -4.0))
+    path = tmp_path / "check.json"
+    tree = f"{{enabled: true, max_depth: 1, verify_model: {path}}}"
+    ElementCheck({4: no, 5: no, 6: no, 7: yes}, threshold=0.5).save(path)
+    _, first = _run(tmp_path / "run", scan, tree=tree)
+    checked = (first["instance"] > 0) & (first["class"] == int(ClassId.PILLAR))
+    assert checked.any()
+    ElementCheck({4: no, 5: no, 6: no, 7: no}, threshold=0.5).save(path)
+    _, again = _run(tmp_path / "run", scan, tree=tree)
+    assert (again["class"][checked] == int(ClassId.OTHER)).all()
+    assert not ((again["instance"] > 0) & np.isin(again["class"], [int(c) for c in ELEMENT_CLASSES])).any()
+
+
 def test_tile_slices_give_the_labels_of_whole_tiles_and_resume_per_slice(tmp_path, scan, monkeypatch):
     """A tile cut into row slices (labels.plan_slices, issue 44), each slice also labelling
     the voxel-dropped points whose representative is among its rows, gives the labels of

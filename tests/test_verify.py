@@ -191,11 +191,11 @@ def test_a_bad_check_file_is_one_line_naming_the_key(tmp_path) -> None:
     with one line that names the key and the file, before it runs anything."""
     from hollowtree.errors import ConfigError
     from hollowtree.pipeline.tree_params import TreeStageParams
-    from hollowtree.pipeline.tree_stage import _check_fingerprint
+    from hollowtree.pipeline.tree_stage import check_fingerprint
 
     bad = tmp_path / "check.json"
     bad.write_text("{not json")
     with pytest.raises(ConfigError, match=r"^tree\.verify_model: .*check\.json is not a readable element check"):
-        _check_fingerprint(TreeStageParams(verify=True, verify_model=str(bad)))
-    assert _check_fingerprint(TreeStageParams(verify=False, verify_model=str(bad))) is None
-    assert len(_check_fingerprint(TreeStageParams(verify=True))) == 16
+        check_fingerprint(TreeStageParams(verify=True, verify_model=str(bad)))
+    assert check_fingerprint(TreeStageParams(verify=False, verify_model=str(bad))) is None
+    assert len(check_fingerprint(TreeStageParams(verify=True))) == 16

@@ -268,12 +268,20 @@ class ElementCheck:
 
 
 def load_verify_model(path: str | Path | None = None) -> ElementCheck:
-    """Read an element check; the package's ``verify-v2.json`` by default (read once per process)."""
-    return _load(str(DEFAULT_VERIFY_PATH if path is None else Path(path).resolve()))
+    """Read an element check; the package's ``verify-v2.json`` by default (read once per
+    process while the file's size and modification time stay the same)."""
+    p = DEFAULT_VERIFY_PATH if path is None else Path(path).resolve()
+    try:
+        st = p.stat()
+        stamp = (st.st_size, st.st_mtime_ns)
+    except OSError:
+        stamp = (-1, -1)  # _load says why it cannot be read
+    return _load(str(p), stamp)
 
 
 @functools.lru_cache(maxsize=4)
-def _load(path: str) -> ElementCheck:
+def _load(path: str, stamp: tuple[int, int]) -> ElementCheck:
+    """The check in ``path``; ``stamp`` (size, mtime) is part of the cache key only."""
     try:
         check = ElementCheck.from_dict(json.loads(Path(path).read_text()))
     except (OSError, ValueError, KeyError, TypeError) as e:
