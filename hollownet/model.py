@@ -32,6 +32,7 @@ from torch import nn
 
 from hollowtree.classes import CLASS_NAMES, ELEMENT_CLASSES, PLANAR_CLASSES, ClassId
 from hollowtree.errors import InputFileError, PipelineError
+from hollowtree.hollownet import DEFAULT_WEIGHTS
 
 __all__ = [
     "CHECKPOINT_VERSION",
@@ -58,8 +59,6 @@ NUM_OUTPUTS: int = len(OUTPUT_CLASSES)
 #: Layout version of checkpoint files; a file of another version is refused.
 CHECKPOINT_VERSION = 1
 _FORMAT = "hollowtree.hollownet"
-#: The shipped weights (``docs/method.md``, "HollowNet" says how they are made).
-DEFAULT_WEIGHTS = Path(__file__).resolve().parent / "weights" / "hollownet-v1.pt"
 
 
 class WeightsError(PipelineError, ValueError):

@@ -27,7 +27,7 @@ from hollowtree.errors import ConfigError
 from hollowtree.pipeline.coarse import COARSE_ALGORITHM
 from hollowtree.pipeline.graph import timed_stage
 from hollowtree.pipeline.tree_params import TreeStageParams
-from hollowtree.pipeline.tree_stage import TREE_ALGORITHM, check_fingerprint
+from hollowtree.pipeline.tree_stage import TREE_ALGORITHM, model_fingerprints
 from hollowtree.pipeline.workflow import Workflow
 
 __all__ = ["run_workflow", "RunReport", "STAGE_ORDER", "changed_stages", "make_synthetic_input"]
@@ -58,9 +58,10 @@ def _stage_params(wf: Workflow) -> dict[str, dict[str, Any]]:
         "ingest": {"inputs": [str(p) for p in wf.input.paths()], **wf.ingest.model_dump(mode="json")},
         "coarse": {**wf.coarse.model_dump(mode="json"), "algorithm": COARSE_ALGORITHM},
         # the algorithm's version too: a rerun after a change of the tree's code redoes it
+        # what the tree's files hold too: one refitted under the same path redoes the tree
         "tree": {**wf.tree.model_dump(mode="json", exclude={"device"}), "algorithm": TREE_ALGORITHM,
-                 # the element check's file too: one refitted under the same path redoes the tree
-                 "check": check_fingerprint(TreeStageParams.from_workflow(wf.tree)) if wf.tree.enabled else None},
+                 **(model_fingerprints(TreeStageParams.from_workflow(wf.tree)) if wf.tree.enabled
+                    else {"check": None})},
         "labels": {},
     }
 

@@ -33,6 +33,7 @@ from __future__ import annotations
 import functools
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -432,7 +433,7 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any, device: str = "c
     coarse = stages.get("coarse", {})
     if not coarse or coarse.get("done") != coarse.get("units"):
         raise PipelineError(f"store {url}: the coarse stage is not complete; run it first")
-    h = params_hash([params.to_dict(), coarse["params_hash"], TREE_ALGORITHM, check_fingerprint(params)])
+    h = params_hash([params.to_dict(), coarse["params_hash"], TREE_ALGORITHM, model_fingerprints(params)])
     cfg = {"params": params.to_dict(), "params_hash": h, "device": device}
     stage = Stage(store, STAGE, h, unit_stages=(SPREAD_STAGE,))
     completed = stage.last.get("params_hash") == h
@@ -596,12 +597,15 @@ def element_instances(nodes: pa.Table, imap: np.ndarray, cmap: np.ndarray,
                              np.column_stack([col[c] for c in _BOX]), col["depth"], seg, g, shape)
 
 
+def _file_hash(path: Path) -> str:
+    import hashlib
+
+    return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+
+
 def check_fingerprint(params: TreeStageParams) -> str | None:
     """What the element check's file holds (a hash), so a store reruns its tree when the
     check changes under the same path; None when the check is off."""
-    import hashlib
-    from pathlib import Path
-
     from hollowtree.tree.verify import DEFAULT_VERIFY_PATH, load_verify_model
 
     if not params.verify:
@@ -611,7 +615,24 @@ def check_fingerprint(params: TreeStageParams) -> str | None:
         load_verify_model(path)  # a bad file is refused before any batch runs
     except ConfigError as e:
         raise ConfigError(f"tree.verify_model: {e}") from None
-    return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+    return _file_hash(path)
+
+
+def model_fingerprints(params: TreeStageParams) -> dict[str, str | None]:
+    """Hashes of what the tree's files hold (HollowNet's weights, the split model when the
+    decision uses it, the element check when it is on), so a file rewritten under the same
+    path (a refit with ``--out`` over it) redoes the tree."""
+    from hollowtree.hollownet import DEFAULT_WEIGHTS
+    from hollowtree.tree.split import DEFAULT_SPLIT_PATH
+
+    weights = DEFAULT_WEIGHTS if params.weights is None else Path(params.weights)
+    split = DEFAULT_SPLIT_PATH if params.split_model is None else Path(params.split_model)
+    try:
+        hollownet = _file_hash(weights)
+    except OSError as e:
+        raise ConfigError(f"tree.weights: {weights} cannot be read: {e.strerror or e}") from None
+    return {"check": check_fingerprint(params), "hollownet": hollownet,
+            "split": _file_hash(split) if params.decision == "split-model" else None}
 
 
 def _check_elements(nodes: pa.Table, imap: np.ndarray, cmap: np.ndarray, ground: np.ndarray,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import laspy
 import numpy as np
 import pytest
@@ -566,6 +568,40 @@ def test_a_check_refitted_under_the_same_path_redoes_the_tree(tmp_path, scan):
     _, again = _run(tmp_path / "run", scan, tree=tree)
     assert (again["class"][checked] == int(ClassId.OTHER)).all()
     assert not ((again["instance"] > 0) & np.isin(again["class"], [int(c) for c in ELEMENT_CLASSES])).any()
+
+
+def test_weights_or_split_model_rewritten_in_place_change_the_recorded_tree_parameters(tmp_path, scan):
+    """HollowNet's weights and the split model rewritten under the same path (a refit with
+    ``--out`` over the file) change the tree's recorded parameters, so a rerun redoes the
+    tree and the labels; the split model is reread, not served from the process's cache."""
+    import shutil
+
+    from hollowtree.hollownet import DEFAULT_WEIGHTS
+    from hollowtree.pipeline.run import _stage_params, changed_stages
+    from hollowtree.tree.split import DEFAULT_SPLIT_PATH, load_split_model
+
+    weights, split = tmp_path / "w.pt", tmp_path / "split.json"
+    shutil.copy(DEFAULT_WEIGHTS, weights)
+    shutil.copy(DEFAULT_SPLIT_PATH, split)
+    wf_path = tmp_path / "wf.yaml"
+    wf_path.write_text(f"input: {{files: [{scan}]}}\nstore: {tmp_path / 's.zarr'}\n"
+                       f"tree: {{enabled: true, weights: {weights}, split_model: {split}}}\n")
+    before = _stage_params(load_workflow(wf_path))
+    assert changed_stages(before, _stage_params(load_workflow(wf_path))) == ([], [])
+    first = load_split_model(split)
+    model = json.loads(split.read_text())
+    model["threshold"] = 0.25
+    split.write_text(json.dumps(model))
+    redo, diffs = changed_stages(before, _stage_params(load_workflow(wf_path)))
+    assert redo == ["tree", "labels"]
+    assert [d.split(":")[0] for d in diffs] == ["tree.split"]
+    assert load_split_model(split).threshold == 0.25 != first.threshold
+    before = _stage_params(load_workflow(wf_path))
+    with weights.open("ab") as f:
+        f.write(b"\0")
+    redo, diffs = changed_stages(before, _stage_params(load_workflow(wf_path)))
+    assert redo == ["tree", "labels"]
+    assert [d.split(":")[0] for d in diffs] == ["tree.hollownet"]
 
 
 def test_tile_slices_give_the_labels_of_whole_tiles_and_resume_per_slice(tmp_path, scan, monkeypatch):

@@ -42,7 +42,8 @@ from hollowtree.arrays import FloatArray
 from hollowtree.classes import CLASS_NAMES, ELEMENT_CLASSES, NUM_CLASSES
 from hollowtree.errors import ConfigError
 
-__all__ = ["DEFAULT_SPLIT_PATH", "FEATURE_NAMES", "N_PROBS", "SplitModel", "load_split_model", "split_features"]
+__all__ = ["DEFAULT_SPLIT_PATH", "FEATURE_NAMES", "N_PROBS", "SplitModel", "file_stamp", "load_split_model",
+           "split_features"]
 
 #: The split model shipped with the package.
 DEFAULT_SPLIT_PATH = Path(__file__).resolve().parent / "data" / "split-v1.json"
@@ -249,12 +250,26 @@ class SplitModel:
 
 def load_split_model(path: str | Path | None = None) -> SplitModel:
     """Read a split model; the package's ``split-v1.json`` by default (read once per
-    process: every tree task asks for it)."""
-    return _load(str(DEFAULT_SPLIT_PATH if path is None else Path(path).resolve()))
+    process while the file's size and modification time stay the same: every tree task
+    asks for it)."""
+    p = DEFAULT_SPLIT_PATH if path is None else Path(path).resolve()
+    return _load(str(p), file_stamp(p))
+
+
+def file_stamp(path: Path) -> tuple[int, int]:
+    """A file's size and modification time (ns): the part of a loader's cache key that has
+    a file rewritten in place read again; (-1, -1) where it cannot be read (the loader then
+    says why)."""
+    try:
+        st = path.stat()
+    except OSError:
+        return -1, -1
+    return st.st_size, st.st_mtime_ns
 
 
 @functools.lru_cache(maxsize=4)
-def _load(path: str) -> SplitModel:
+def _load(path: str, stamp: tuple[int, int]) -> SplitModel:
+    """The split model in ``path``; ``stamp`` (size, mtime) is part of the cache key only."""
     try:
         return SplitModel.from_dict(json.loads(Path(path).read_text()))
     except (OSError, ValueError, KeyError, TypeError, IndexError) as e:

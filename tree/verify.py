@@ -34,7 +34,7 @@ import numpy.typing as npt
 from hollowtree.arrays import FloatArray, IntArray
 from hollowtree.classes import ELEMENT_CLASSES, ClassId, class_id
 from hollowtree.errors import ConfigError
-from hollowtree.tree.split import SplitModel
+from hollowtree.tree.split import SplitModel, file_stamp
 
 __all__ = ["DEFAULT_VERIFY_PATH", "SHAPE_FEATURES", "VERIFY_FEATURES", "ElementCheck", "VerifyModel",
            "instance_features", "load_verify_model", "local_shape"]
@@ -271,12 +271,7 @@ def load_verify_model(path: str | Path | None = None) -> ElementCheck:
     """Read an element check; the package's ``verify-v2.json`` by default (read once per
     process while the file's size and modification time stay the same)."""
     p = DEFAULT_VERIFY_PATH if path is None else Path(path).resolve()
-    try:
-        st = p.stat()
-        stamp = (st.st_size, st.st_mtime_ns)
-    except OSError:
-        stamp = (-1, -1)  # _load says why it cannot be read
-    return _load(str(p), stamp)
+    return _load(str(p), file_stamp(p))
 
 
 @functools.lru_cache(maxsize=4)
