@@ -42,7 +42,7 @@ import numpy as np  # noqa: E402
 
 from hollowtree.classes import ELEMENT_CLASSES, ClassId  # noqa: E402
 from hollowtree.pipeline.coarse import COARSE_ALGORITHM  # noqa: E402
-from hollowtree.pipeline.evaluate import evaluate_inputs  # noqa: E402
+from hollowtree.pipeline.evaluate import evaluate_inputs, machine  # noqa: E402
 from hollowtree.pipeline.tree_stage import TREE_ALGORITHM  # noqa: E402
 from hollowtree.scenes.procedural import FAMILIES, GENERATOR, family_of, scan_draw, split_seeds  # noqa: E402
 from hollowtree.scenes.synth import synth  # noqa: E402
@@ -171,7 +171,7 @@ def main(argv: list[str] | None = None) -> int:
                                "generator": GENERATOR, "seeds": seeds, "points": list(args.points), "workflow": "workflows/local.yaml",
                                "tree_algorithm": TREE_ALGORITHM, "coarse_algorithm": COARSE_ALGORITHM,
                                "grid_algorithm": GRID_ALGORITHM, "totals": total, "families": fam, "visibility": visibility, "sites": sites,
-                               "seconds": round(wall, 1)},
+                               "seconds": round(wall, 1), "machine": machine()},
                               indent=1) + "\n")
     print(f"results: {out}")
     return 0

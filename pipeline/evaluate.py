@@ -47,7 +47,7 @@ from hollowtree.scenes.metrics import Evaluation, LabelCounts, count_labels, sco
 from hollowtree.tiling.readers import SUFFIXES, probe, read_blocks
 from hollowtree.tiling.store import RunStore
 
-__all__ = ["METHODS", "GT_DIMS", "DEFAULT_WORKFLOW", "SiteResult", "evaluate_inputs", "evaluate_store",
+__all__ = ["METHODS", "GT_DIMS", "DEFAULT_WORKFLOW", "SiteResult", "evaluate_inputs", "evaluate_store", "machine",
            "format_table", "primitive_groups", "draw_panels", "seed_spread", "format_spread"]
 
 #: The three methods, in the order of the paper's Fig. 1 (b), (c), (d).
@@ -485,6 +485,19 @@ def _algorithms() -> dict[str, str]:
     return {"tree_algorithm": TREE_ALGORITHM, "coarse_algorithm": COARSE_ALGORITHM, "grid_algorithm": GRID_ALGORITHM}
 
 
+def machine() -> dict[str, Any]:
+    """The machine a result was measured on: cores, platform and CPU model. Labels can
+    differ at the margin between CPU types (the numeric kernels of BLAS differ), so
+    variants are compared on one machine."""
+    cpu = platform.processor()
+    try:
+        cpu = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
+                    if line.startswith("model name")), cpu)
+    except OSError:
+        pass
+    return {"cpus": os.cpu_count(), "platform": platform.platform(), "cpu": cpu or platform.machine()}
+
+
 def _is_store(text: str) -> bool:
     return (Path(text) / "zarr.json").is_file() or ("://" in text and Path(text).suffix.lower() not in SUFFIXES
                                                    and RunStore.exists(text))
@@ -594,8 +607,7 @@ def evaluate_inputs(
             complete = [r for r in runs if len(r) == len(inputs)]
             payload: dict[str, Any] = {
                 "hollowtree_evaluate": 1, "date": _dt.datetime.now().isoformat(timespec="seconds"),
-                "workflow": str(wf_path), "overrides": list(overrides), **_algorithms(), "machine": {
-                    "cpus": os.cpu_count(), "platform": platform.platform()},
+                "workflow": str(wf_path), "overrides": list(overrides), **_algorithms(), "machine": machine(),
                 "iou_threshold": 0.5, "matching": "greedy one-to-one by IoU (equals Hungarian at IoU >= 0.5)",
                 "seeds": seeds, "sites": [r.to_dict() for r in runs[0]]}
             if seeds > 1:
