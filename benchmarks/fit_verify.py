@@ -8,7 +8,10 @@ class of the element its final instance matches (IoU >= 0.5, any element class; 
 if it matches none). One gradient-boosted classifier per element class (the split
 model's settings) is fitted on them, its AUC measured by 5-fold cross-validation grouped
 by site, and the four are written as one :class:`tree.verify.ElementCheck` file. A
-procedural store of a seed that is not a training seed is refused.
+procedural store of a seed that is not a training seed is refused. ``--choose-thresholds``
+also chooses each class's threshold on the training sites: the cross-validation's
+out-of-fold probabilities decide every instance as the check would, and the thresholds
+that give the best F1 of all elements together are written with the models.
 
 ``sweep``: on the stores of a validation work folder (element check off), what each
 threshold would do (an instance takes its most probable class when that reaches the
@@ -104,9 +107,12 @@ def store_rows(path: Path) -> dict[str, np.ndarray]:
     gc, gi = np.asarray(b.extra["gt_class"], np.int64), np.asarray(b.extra["gt_instance"], np.int64)
     match = _matches(gc, gi, pc, pi)
     keys = fmap[ids] * 256 + cls
+    # only points of a true or a predicted element count in the matching
+    keep = ((gi > 0) & np.isin(gc, _ELEMENTS)) | ((pi > 0) & np.isin(pc, _ELEMENTS))
+    gt = np.unique(gi[keep & (gi > 0) & np.isin(gc, _ELEMENTS)] * 256 + gc[keep & (gi > 0) & np.isin(gc, _ELEMENTS)])
     return {"features": feats, "cls": cls, "key": keys, "target": np.asarray([match.get(int(k), 0) for k in keys]),
-            "gc": np.asarray(b.extra["gt_class"], np.int64), "gi": np.asarray(b.extra["gt_instance"], np.int64),
-            "pc": pc, "pi": pi}
+            "gc": gc[keep], "gi": gi[keep], "pc": pc[keep], "pi": pi[keep],
+            "gt": {int(c): int((gt % 256 == c).sum()) for c in _ELEMENTS}}
 
 
 def _stores(paths: list[Path]) -> list[Path]:
@@ -119,18 +125,24 @@ def _stores(paths: list[Path]) -> list[Path]:
     return out
 
 
-def fit(work: list[Path], out: Path, threshold: float, class_thresholds: dict[int, float] | None = None) -> int:
+def fit(work: list[Path], out: Path, threshold: float, class_thresholds: dict[int, float] | None = None,
+        choose: list[float] | None = None) -> int:
+    """Fit the check on training stores; with ``choose`` (a grid), each class's threshold
+    is chosen by :func:`choose_thresholds` on the out-of-fold probabilities of the
+    cross-validation, starting from ``threshold`` and ``class_thresholds``."""
     from sklearn.ensemble import GradientBoostingClassifier
     from sklearn.metrics import roc_auc_score
     from sklearn.model_selection import GroupKFold
 
     lo, hi = SPLITS["train"]
-    xs, ys, groups = [], [], []
+    xs, ys, groups, rows = [], [], [], []
     for k, s in enumerate(_stores(work)):
         seed = _seed(s)
         if seed is not None and not lo <= seed < hi:
             raise SystemExit(f"{s}: not a training seed ({lo}-{hi - 1}); the element check is fitted on training seeds")
         r = store_rows(s)
+        if choose:
+            rows.append(r)
         xs.append(r["features"])
         ys.append(r["target"])
         groups.append(np.full(len(r["target"]), seed if seed is not None else -1 - k))
@@ -143,18 +155,34 @@ def fit(work: list[Path], out: Path, threshold: float, class_thresholds: dict[in
 
     models, info = {}, {"sites": sorted({int(v) for v in g if v >= 0}), "files": int(len({int(v) for v in g if v < 0})),
                         "instances": int(len(y)), "auc": {}}
-    for c in _ELEMENTS.tolist():
+    oof = np.zeros((len(y), len(_ELEMENTS)))
+    for j, c in enumerate(_ELEMENTS.tolist()):
         yc = (y == c).astype(int)
-        oof = np.zeros(len(yc))
         for tr, te in GroupKFold(n_splits=5).split(x, yc, g):
-            oof[te] = model().fit(x[tr], yc[tr]).predict_proba(x[te])[:, 1]
-        info["auc"][ClassId(c).label] = round(float(roc_auc_score(yc, oof)), 4)
+            oof[te, j] = model().fit(x[tr], yc[tr]).predict_proba(x[te])[:, 1]
+        info["auc"][ClassId(c).label] = round(float(roc_auc_score(yc, oof[:, j])), 4)
         m = model().fit(x, yc)
         models[c] = VerifyModel.from_sklearn(m, info={"positives": int(yc.sum())})
         imp = sorted(zip(m.feature_importances_.tolist(), VERIFY_FEATURES, strict=True), reverse=True)
         print(ClassId(c).label, int(yc.sum()), "AUC", info["auc"][ClassId(c).label], "|",
               ", ".join(f"{n} {v:.2f}" for v, n in imp[:6]), flush=True)
-    ElementCheck(models=models, threshold=threshold, info=info, class_thresholds=class_thresholds or {}).save(out)
+    check = ElementCheck(models=models, threshold=threshold, info=info, class_thresholds=class_thresholds or {})
+    if choose:
+        probs = np.split(oof, np.cumsum([len(r["target"]) for r in rows])[:-1])
+        gt = sum(sum(r["gt"].values()) for r in rows)
+        f0, p0, _ = _total(rows, probs, check.thresholds(), True)
+        ts, f1 = choose_thresholds(rows, probs, check.thresholds(), choose)
+        found, pred, per = _total(rows, probs, ts, True)
+        print(f"out-of-fold, {gt} elements: thresholds {check.thresholds().tolist()} found {f0} of {p0} predicted "
+              f"(F1 {2 * f0 / max(gt + p0, 1):.4f}) -> {ts.tolist()} found {found} of {pred} (F1 {f1:.4f}); "
+              + " ".join(f"{ClassId(c).label}:{a}/{b}" for c, (a, b) in per.items()), flush=True)
+        check = ElementCheck(models=models, threshold=threshold, info=info,
+                             class_thresholds={int(c): float(t) for c, t in zip(_ELEMENTS.tolist(), ts.tolist(),
+                                                                                 strict=True)})
+        info["thresholds"] = {"chosen_on": "out-of-fold probabilities of the training sites (grouped 5-fold)",
+                              "objective": "F1 of all elements", "grid": list(choose), "f1": round(f1, 4),
+                              "start_f1": round(2 * f0 / max(gt + p0, 1), 4)}
+    check.save(out)
     return 0
 
 
@@ -175,6 +203,79 @@ def sweep(work: list[Path], model_path: Path | None, thresholds: list[float], re
     return 0
 
 
+def _decide(r: dict[str, np.ndarray], p: np.ndarray, ts: np.ndarray, relabel: bool) -> np.ndarray:
+    """The check's class for each instance of one store (0 = rejected): as
+    :meth:`tree.verify.ElementCheck.decide` (``relabel``), or keep-or-reject."""
+    if not len(p):
+        return np.zeros(0, dtype=np.int64)
+    best = np.searchsorted(_ELEMENTS, r["cls"]) if not relabel else p.argmax(axis=1)
+    return np.where(p[np.arange(len(p)), best] >= ts[best], _ELEMENTS[best], 0)
+
+
+def _score(r: dict[str, np.ndarray], new: np.ndarray) -> tuple[int, int, dict[int, list[int]]]:
+    """Found and predicted elements (per class too) of one store once its instances take ``new``."""
+    pc, pi = r["pc"].copy(), r["pi"].copy()
+    pkey = pi * 256 + pc
+    for k, c in zip(r["key"].tolist(), new.tolist(), strict=True):
+        if c == k % 256:
+            continue
+        sel = pkey == k
+        if c == 0:
+            pi[sel] = 0
+            pc[sel] = 8
+        else:
+            pc[sel] = c
+    return _found(_matches(r["gc"], r["gi"], pc, pi))
+
+
+def _total(rows: list[dict[str, np.ndarray]], probs: list[np.ndarray], ts: np.ndarray, relabel: bool,
+           cache: dict | None = None) -> tuple[int, int, dict[int, list[int]]]:
+    """:func:`_score` summed over stores at thresholds ``ts``; ``cache`` keeps each store's
+    score per decision vector (most thresholds leave most stores' decisions alone)."""
+    found = pred = 0
+    per: dict[int, list[int]] = {int(c): [0, 0] for c in _ELEMENTS}
+    for k, (r, p) in enumerate(zip(rows, probs, strict=True)):
+        new = _decide(r, p, ts, relabel)
+        key = (k, new.tobytes())
+        if cache is None or key not in cache:
+            res = _score(r, new)
+            if cache is not None:
+                cache[key] = res
+        else:
+            res = cache[key]
+        found += res[0]
+        pred += res[1]
+        for c, (x, y) in res[2].items():
+            per[c][0] += x
+            per[c][1] += y
+    return found, pred, per
+
+
+def choose_thresholds(rows: list[dict[str, np.ndarray]], probs: list[np.ndarray], start: np.ndarray,
+                      grid: list[float]) -> tuple[np.ndarray, float]:
+    """Each class's threshold by coordinate ascent (two passes, classes in order) on the
+    F1 of all elements together, 2 found / (true + predicted), of the check's decisions on
+    ``probs``; a tie keeps the current threshold. Returns the thresholds and their F1."""
+    gt = sum(sum(r["gt"].values()) for r in rows)
+    cache: dict = {}
+
+    def f1(ts: np.ndarray) -> float:
+        found, pred, _ = _total(rows, probs, ts, True, cache)
+        return 2.0 * found / max(gt + pred, 1)
+
+    ts = np.asarray(start, dtype=np.float64).copy()
+    best = f1(ts)
+    for _ in range(2):
+        for j in range(len(_ELEMENTS)):
+            for t in grid:
+                trial = ts.copy()
+                trial[j] = t
+                v = f1(trial)
+                if v > best + 1e-12:
+                    ts, best = trial, v
+    return ts, best
+
+
 def _sweep_rows(rows: list[dict[str, np.ndarray]], probs: list[np.ndarray], check: ElementCheck,
                 thresholds: list[float], relabel: bool, vary: str | None) -> None:
     for t in thresholds:
@@ -182,31 +283,7 @@ def _sweep_rows(rows: list[dict[str, np.ndarray]], probs: list[np.ndarray], chec
         if vary is not None:
             ts = check.thresholds()
             ts[int(np.searchsorted(_ELEMENTS, int(class_id(vary))))] = t
-        found = pred = 0
-        per: dict[int, list[int]] = {int(c): [0, 0] for c in _ELEMENTS}
-        for r, p in zip(rows, probs, strict=True):
-            best = p.argmax(axis=1) if len(p) else np.zeros(0, dtype=np.int64)
-            new = np.where(p[np.arange(len(p)), best] >= ts[best], _ELEMENTS[best], 0) if len(p) else best
-            if not relabel and len(p):
-                own = np.searchsorted(_ELEMENTS, r["cls"])
-                new = np.where(p[np.arange(len(p)), own] >= ts[own], r["cls"], 0)
-            pc, pi = r["pc"].copy(), r["pi"].copy()
-            pkey = pi * 256 + pc
-            for k, c in zip(r["key"].tolist(), new.tolist(), strict=True):
-                if c == k % 256:
-                    continue
-                sel = pkey == k
-                if c == 0:
-                    pi[sel] = 0
-                    pc[sel] = 8
-                else:
-                    pc[sel] = c
-            fnd, prd, pc_ = _found(_matches(r["gc"], r["gi"], pc, pi))
-            found += fnd
-            pred += prd
-            for c, (a, b) in pc_.items():
-                per[c][0] += a
-                per[c][1] += b
+        found, pred, per = _total(rows, probs, ts, relabel)
         print(f"{t:>9.2f} {found:>6} {pred:>6} {100 * found / max(pred, 1):>8.1f}%  "
               + " ".join(f"{ClassId(c).label}:{a}/{b}" for c, (a, b) in per.items()), flush=True)
 
@@ -220,6 +297,9 @@ def main(argv: list[str] | None = None) -> int:
     f.add_argument("--threshold", type=float, default=0.5)
     f.add_argument("--class-threshold", nargs="+", default=[], metavar="CLASS=T",
                    help="a class's own threshold (chosen with sweep --vary), e.g. dome=0.3")
+    f.add_argument("--choose-thresholds", nargs="*", type=float, default=None, metavar="T",
+                   help="choose each class's threshold on the training sites' out-of-fold probabilities "
+                        "(from --threshold / --class-threshold; the grid T ..., default 0.05 to 0.8)")
     s = sub.add_parser("sweep")
     s.add_argument("work", type=Path, nargs="+", help="bench_generalize work folders (validation split) or stores")
     s.add_argument("--model", type=Path, default=None)
@@ -239,7 +319,12 @@ def main(argv: list[str] | None = None) -> int:
             if c not in _ELEMENTS or not 0.0 <= v <= 1.0:
                 ap.error(f"--class-threshold {item!r}: expected CLASS=T, an element class and a number in [0, 1]")
             per[c] = v
-        return fit(a.work, a.out, a.threshold, per)
+        grid = a.choose_thresholds
+        if grid is not None and not grid:
+            grid = [round(0.05 * k, 2) for k in range(1, 17)]
+        if grid and not all(0.0 <= t <= 1.0 for t in grid):
+            ap.error("--choose-thresholds: thresholds are numbers in [0, 1]")
+        return fit(a.work, a.out, a.threshold, per, grid)
     return sweep(a.work, a.model, a.thresholds, not a.reject_only, a.vary)
 
 

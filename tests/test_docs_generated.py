@@ -45,6 +45,23 @@ def test_every_generator_is_used_and_render_is_idempotent(report):
     assert report.render(new, {}) == new
 
 
+def test_per_class_view_of_a_validation_variant_adds_up_its_runs(report, capsys):
+    import json
+
+    assert report.main(["--classes", "shape-check"]) == 0
+    line = [x for x in capsys.readouterr().out.splitlines() if x.startswith("| shape-check |")][0]
+    cells = [c.strip() for c in line.strip("|").split("|")]
+    domes = sum(json.loads((report.RESULTS / f"generalize-{row}-shape-check{suf}.json").read_text())
+                ["totals"]["tree"]["dome"]["found"]
+                for row in ("val", "val-4m", "val-density-10m") for suf in ("", "-seed1", "-seed2"))
+    assert cells[1] == "3"
+    assert cells[3].startswith(f"{domes / 3:.1f} / ")
+    with pytest.raises(SystemExit) as e:
+        report.main(["--classes", "no-such-variant"])
+    assert e.value.code == 2
+    assert "'no-such-variant' is not a variant of VAL_SEEDS" in capsys.readouterr().err
+
+
 def _slug(heading: str) -> str:
     """GitHub's anchor of a heading."""
     text = re.sub(r"\[([^\]]*)\]\([^)]*\)", r"\1", heading.strip().lower())

@@ -32,3 +32,61 @@ def test_a_class_threshold_must_name_an_element_class_and_a_share(item, tmp_path
         fit_verify.main(["fit", str(tmp_path), "--out", str(tmp_path / "c.json"), "--class-threshold", item])
     assert e.value.code == 2
     assert f"--class-threshold {item!r}" in capsys.readouterr().err
+
+
+def test_thresholds_are_chosen_to_drop_a_false_element_and_keep_a_true_one():
+    import numpy as np
+
+    # ten points of a true dome (instance 1) and ten of a tree (other), both predicted dome
+    dome, other = 5, 8
+    row = {"gc": np.r_[np.full(10, dome), np.full(10, other)], "gi": np.r_[np.full(10, 1), np.full(10, 2)],
+           "pc": np.full(20, dome), "pi": np.r_[np.full(10, 1), np.full(10, 2)],
+           "key": np.array([1 * 256 + dome, 2 * 256 + dome]), "cls": np.array([dome, dome]), "gt": {dome: 1}}
+    probs = [np.array([[0.0, 0.9, 0.0, 0.0], [0.0, 0.3, 0.0, 0.0]])]
+    start = np.full(4, 0.1)
+    assert fit_verify._total([row], probs, start, True)[:2] == (1, 2)
+    ts, f1 = fit_verify.choose_thresholds([row], probs, start, [0.1, 0.2, 0.5, 0.95])
+    assert f1 == 1.0
+    assert ts.tolist() == [0.1, 0.5, 0.1, 0.1]  # 0.5 drops the tree; 0.95 would drop the dome too
+
+
+def test_fit_chooses_and_writes_the_thresholds_of_its_out_of_fold_decisions(tmp_path, monkeypatch):
+    import numpy as np
+
+    from hollowtree.tree.verify import VERIFY_FEATURES, load_verify_model
+
+    # ten training sites; each holds, for every element class, one true element and one
+    # false one (a tree called that class) that a feature tells apart
+    rng = np.random.default_rng(0)
+
+    def rows(store):
+        feats, cls, target, gc, gi, pc, pi = [], [], [], [], [], [], []
+        for j, c in enumerate((4, 5, 6, 7)):
+            for true in (1, 0):
+                f = rng.normal(0.0, 0.01, len(VERIFY_FEATURES))
+                f[j], f[len(VERIFY_FEATURES) - 1] = 1.0, float(true)
+                inst = 2 * j + 2 - true
+                feats.append(f)
+                cls.append(c)
+                target.append(c if true else 0)
+                gc += [c if true else 8] * 5
+                gi += [inst] * 5
+                pc += [c] * 5
+                pi += [inst] * 5
+        cls = np.array(cls)
+        return {"features": np.array(feats), "cls": cls, "target": np.array(target),
+                "key": np.array([(2 * j + 2 - t) * 256 + c for j, c in enumerate((4, 5, 6, 7)) for t in (1, 0)]),
+                "gc": np.array(gc), "gi": np.array(gi), "pc": np.array(pc), "pi": np.array(pi),
+                "gt": {c: 1 for c in (4, 5, 6, 7)}}
+
+    stores = [tmp_path / f"gen-v2-{k}-1000.zarr" for k in range(10)]
+    monkeypatch.setattr(fit_verify, "_stores", lambda work: stores)
+    monkeypatch.setattr(fit_verify, "store_rows", rows)
+    out = tmp_path / "check.json"
+    assert fit_verify.main(["fit", str(tmp_path), "--out", str(out), "--threshold", "0",
+                            "--choose-thresholds", "0", "0.5"]) == 0
+    check = load_verify_model(out)
+    # at 0 every false element is kept (F1 2/3); 0.5 drops them and keeps the true ones
+    assert check.info["thresholds"]["start_f1"] < 0.7
+    assert check.info["thresholds"]["f1"] == 1.0
+    assert check.thresholds().tolist() == [0.5, 0.5, 0.5, 0.5]
