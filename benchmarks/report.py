@@ -67,9 +67,10 @@ VAL_VARIANTS = {
 VAL_SEEDS = {
     "group300k": "`tree.max_group_points` 1 M -> 300 k",
     "coarse-cut": "rejected: S2 and S3 also offer the cut at their most prominent peak",
-    "shape-check": "`tree-v37`: the element check with its points' shape (the default)",
+    "shape-check": "`tree-v37`: the element check with its points' shape",
     "class-thr": "not adopted: the check's thresholds for domes 0.5 and minarets 0.3, chosen on these sites",
     "oof-thr": "rejected: the thresholds chosen on training seeds",
+    "oof-dm": "`tree-v39`: the dome and minaret thresholds chosen on training seeds (the default)",
 }
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
 BEGIN = re.compile(r"<!-- generated: ([\w.-]+) -->\n")

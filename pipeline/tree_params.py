@@ -65,7 +65,7 @@ class TreeStageParams(Params, owner="tree"):
     verify : bool
         Run the element check (``tree/verify.py``) on every element instance after the merge.
     verify_model : str or None
-        The element check's JSON; None = the shipped ``tree/data/verify-v2.json``.
+        The element check's JSON; None = the shipped ``tree/data/verify-v3.json``.
     other_max_base, other_max_size : float or None
         A part HollowNet calls other (clutter) whose lowest point is more than
         ``other_max_base`` metres above the local ground, or that is larger than
@@ -114,7 +114,7 @@ class TreeStageParams(Params, owner="tree"):
                    "merge, from its class, score, points, box and height above the ground; an instance it does not "
                    "believe becomes other, or takes the element class it believes")
     verify_model: str | None = param(
-        None, doc="the element check's file (benchmarks/fit_verify.py); null = the shipped tree/data/verify-v2.json")
+        None, doc="the element check's file (benchmarks/fit_verify.py); null = the shipped tree/data/verify-v3.json")
 
     def __post_init__(self) -> None:
         super().__post_init__()

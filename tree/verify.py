@@ -40,7 +40,7 @@ __all__ = ["DEFAULT_VERIFY_PATH", "SHAPE_FEATURES", "VERIFY_FEATURES", "ElementC
            "instance_features", "load_verify_model", "local_shape"]
 
 #: The element check shipped with the package.
-DEFAULT_VERIFY_PATH = Path(__file__).resolve().parent / "data" / "verify-v2.json"
+DEFAULT_VERIFY_PATH = Path(__file__).resolve().parent / "data" / "verify-v3.json"
 
 _ELEMENTS = tuple(int(c) for c in ELEMENT_CLASSES)
 
@@ -268,7 +268,7 @@ class ElementCheck:
 
 
 def load_verify_model(path: str | Path | None = None) -> ElementCheck:
-    """Read an element check; the package's ``verify-v2.json`` by default (read once per
+    """Read an element check; the package's ``verify-v3.json`` by default (read once per
     process while the file's size and modification time stay the same)."""
     p = DEFAULT_VERIFY_PATH if path is None else Path(path).resolve()
     return _load(str(p), file_stamp(p))
