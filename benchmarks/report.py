@@ -37,8 +37,8 @@ RESULTS = REPO / "benchmarks" / "results"
 #: The latest run of each kind of element-recall result (``bench_generalize.py --json``).
 #: These are the figures of docs/generalize.md; edit the file names when a newer run replaces one.
 LATEST = {
-    "test": "generalize-test-shape-check.json",
-    "test-5m": "generalize-test-5m-shape-check.json",
+    "test": "generalize-test-tree-v39.json",
+    "test-5m": "generalize-test-5m-tree-v39.json",
     "val-4m": "generalize-val-4m-shape-check.json",
     "val-1m": "generalize-val-density-1m-shape-check.json",
     "val-10m": "generalize-val-density-10m-shape-check.json",
