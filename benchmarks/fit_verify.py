@@ -110,8 +110,9 @@ def store_rows(path: Path) -> dict[str, np.ndarray]:
     match = _matches(gc, gi, pc, pi)
     keys = fmap[ids] * 256 + cls
     # only points of a true or a predicted element count in the matching
-    keep = ((gi > 0) & np.isin(gc, _ELEMENTS)) | ((pi > 0) & np.isin(pc, _ELEMENTS))
-    gt = np.unique(gi[keep & (gi > 0) & np.isin(gc, _ELEMENTS)] * 256 + gc[keep & (gi > 0) & np.isin(gc, _ELEMENTS)])
+    true = (gi > 0) & np.isin(gc, _ELEMENTS)
+    keep = true | ((pi > 0) & np.isin(pc, _ELEMENTS))
+    gt = np.unique(gi[true] * 256 + gc[true])
     return {"features": feats, "cls": cls, "key": keys, "target": np.asarray([match.get(int(k), 0) for k in keys]),
             "gc": gc[keep], "gi": gi[keep], "pc": pc[keep], "pi": pi[keep],
             "gt": {int(c): int((gt % 256 == c).sum()) for c in _ELEMENTS}}
