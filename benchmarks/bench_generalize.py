@@ -20,7 +20,7 @@ An element counts as found at IoU >= 0.5 (greedy one-to-one matching); recall is
 / ground truth, precision matched predictions / predictions. Scans are kept under
 ``--work`` and reused by a later run with the same arguments.
 
-Run: ``python benchmarks/bench_generalize.py [--split test] [--sites 30] [--family F]
+Run: ``python benchmarks/bench_generalize.py [--split test] [--sites 30] [--family F ...]
 [--points 500000 2000000] [--no-energy] [--set KEY=VALUE] [--work out/generalize] [--json PATH]``.
 """
 
@@ -80,11 +80,22 @@ def _table(rows: dict[str, dict[str, dict[str, int]]], title: str) -> str:
     return "\n".join(lines)
 
 
+def pick_seeds(split: str, sites: int, skip: int = 0, families: list[str] | None = None) -> list[int]:
+    """``sites`` seeds of ``split`` after its first ``skip``; with ``families``, as many of
+    each family after its first ``skip``, in seed order.
+
+    >>> pick_seeds("val", 2, 4, ["monument", "fort"])
+    [100028, 100032, 100035, 100039]
+    """
+    return sorted(s for f in (families or [None]) for s in split_seeds(split, skip + sites, family=f)[skip:])
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--split", default="test", choices=["train", "val", "test"])
     ap.add_argument("--sites", type=int, default=30)
-    ap.add_argument("--family", choices=FAMILIES, default=None, help="only this family's seeds of the split")
+    ap.add_argument("--family", nargs="+", choices=FAMILIES, default=None, metavar="F",
+                    help="only these families' seeds of the split: --sites and --skip count per family")
     ap.add_argument("--skip", type=int, default=0, metavar="K",
                     help="leave out the split's first K seeds (test seeds already read: report on fresh ones)")
     ap.add_argument("--points", type=float, nargs=2, default=(5e5, 2e6), metavar=("MIN", "MAX"))
@@ -96,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.sites < 1 or args.skip < 0 or not 0 < args.points[0] <= args.points[1]:
         ap.error("--sites must be positive, --skip at least 0 and --points MIN MAX with 0 < MIN <= MAX")
-    seeds = split_seeds(args.split, args.skip + args.sites, family=args.family)[args.skip:]
+    seeds = pick_seeds(args.split, args.sites, args.skip, args.family)
     args.work.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     scans = []

@@ -129,10 +129,10 @@ def _stores(paths: list[Path]) -> list[Path]:
 
 
 def fit(work: list[Path], out: Path, threshold: float, class_thresholds: dict[int, float] | None = None,
-        choose: list[float] | None = None) -> int:
+        choose: list[float] | None = None, keep: frozenset[int] = frozenset()) -> int:
     """Fit the check on training stores; with ``choose`` (a grid), each class's threshold
-    is chosen by :func:`choose_thresholds` on the out-of-fold probabilities of the
-    cross-validation, starting from ``threshold`` and ``class_thresholds``."""
+    but those of ``keep`` is chosen by :func:`choose_thresholds` on the out-of-fold
+    probabilities of the cross-validation, starting from ``threshold`` and ``class_thresholds``."""
     from sklearn.ensemble import GradientBoostingClassifier
     from sklearn.metrics import roc_auc_score
     from sklearn.model_selection import GroupKFold
@@ -174,7 +174,7 @@ def fit(work: list[Path], out: Path, threshold: float, class_thresholds: dict[in
         probs = np.split(oof, np.cumsum([len(r["target"]) for r in rows])[:-1])
         gt = sum(sum(r["gt"].values()) for r in rows)
         f0, p0, _ = _total(rows, probs, check.thresholds(), True)
-        ts, f1 = choose_thresholds(rows, probs, check.thresholds(), choose)
+        ts, f1 = choose_thresholds(rows, probs, check.thresholds(), choose, keep)
         found, pred, per = _total(rows, probs, ts, True)
         print(f"out-of-fold, {gt} elements: thresholds {check.thresholds().tolist()} found {f0} of {p0} predicted "
               f"(F1 {2 * f0 / max(gt + p0, 1):.4f}) -> {ts.tolist()} found {found} of {pred} (F1 {f1:.4f}); "
@@ -184,6 +184,7 @@ def fit(work: list[Path], out: Path, threshold: float, class_thresholds: dict[in
                                                                                  strict=True)})
         info["thresholds"] = {"chosen_on": "out-of-fold probabilities of the training sites (grouped 5-fold)",
                               "objective": "F1 of all elements", "grid": list(choose), "f1": round(f1, 4),
+                              "kept": sorted(ClassId(c).label for c in keep),
                               "start_f1": round(2 * f0 / max(gt + p0, 1), 4)}
     check.save(out)
     return 0
@@ -255,10 +256,11 @@ def _total(rows: list[dict[str, np.ndarray]], probs: list[np.ndarray], ts: np.nd
 
 
 def choose_thresholds(rows: list[dict[str, np.ndarray]], probs: list[np.ndarray], start: np.ndarray,
-                      grid: list[float]) -> tuple[np.ndarray, float]:
+                      grid: list[float], keep: frozenset[int] = frozenset()) -> tuple[np.ndarray, float]:
     """Each class's threshold by coordinate ascent (two passes, classes in order) on the
     F1 of all elements together, 2 found / (true + predicted), of the check's decisions on
-    ``probs``; a tie keeps the current threshold. Returns the thresholds and their F1."""
+    ``probs``; a tie keeps the current threshold, and the classes of ``keep`` keep their
+    ``start``. Returns the thresholds and their F1."""
     gt = sum(sum(r["gt"].values()) for r in rows)
     cache: dict = {}
 
@@ -270,6 +272,8 @@ def choose_thresholds(rows: list[dict[str, np.ndarray]], probs: list[np.ndarray]
     best = f1(ts)
     for _ in range(2):
         for j in range(len(_ELEMENTS)):
+            if int(_ELEMENTS[j]) in keep:
+                continue
             for t in grid:
                 trial = ts.copy()
                 trial[j] = t
@@ -303,6 +307,8 @@ def main(argv: list[str] | None = None) -> int:
     f.add_argument("--choose-thresholds", nargs="*", type=float, default=None, metavar="T",
                    help="choose each class's threshold on the training sites' out-of-fold probabilities "
                         "(from --threshold / --class-threshold; the grid T ..., default 0.05 to 0.8)")
+    f.add_argument("--keep", nargs="+", default=[], metavar="CLASS",
+                   help="with --choose-thresholds: these classes keep their --threshold / --class-threshold")
     s = sub.add_parser("sweep")
     s.add_argument("work", type=Path, nargs="+", help="bench_generalize work folders (validation split) or stores")
     s.add_argument("--model", type=Path, default=None)
@@ -322,12 +328,23 @@ def main(argv: list[str] | None = None) -> int:
             if c not in _ELEMENTS or not 0.0 <= v <= 1.0:
                 ap.error(f"--class-threshold {item!r}: expected CLASS=T, an element class and a number in [0, 1]")
             per[c] = v
+        keep = set()
+        for name in a.keep:
+            try:
+                c = int(class_id(name))
+            except ValueError:
+                c = -1
+            if c not in _ELEMENTS:
+                ap.error(f"--keep {name!r}: expected an element class ({', '.join(ClassId(e).label for e in _ELEMENTS)})")
+            keep.add(c)
+        if keep and a.choose_thresholds is None:
+            ap.error("--keep: only with --choose-thresholds")
         grid = a.choose_thresholds
         if grid is not None and not grid:
             grid = [round(0.05 * k, 2) for k in range(1, 17)]
         if grid and not all(0.0 <= t <= 1.0 for t in grid):
             ap.error("--choose-thresholds: thresholds are numbers in [0, 1]")
-        return fit(a.work, a.out, a.threshold, per, grid)
+        return fit(a.work, a.out, a.threshold, per, grid, frozenset(keep))
     return sweep(a.work, a.model, a.thresholds, not a.reject_only, a.vary)
 
 

@@ -39,15 +39,17 @@ RESULTS = REPO / "benchmarks" / "results"
 LATEST = {
     "test": "generalize-test-tree-v39.json",
     "test-5m": "generalize-test-5m-tree-v39.json",
-    "val-4m": "generalize-val-4m-shape-check.json",
-    "val-1m": "generalize-val-density-1m-shape-check.json",
-    "val-10m": "generalize-val-density-10m-shape-check.json",
-    "val-3m": "generalize-val-density-3m-shape-check.json",
+    "val-4m": "generalize-val-4m-tree-v39.json",
+    "val-1m": "generalize-val-density-1m-tree-v39.json",
+    "val-10m": "generalize-val-density-10m-tree-v39.json",
+    "val-3m": "generalize-val-density-3m-tree-v39.json",
     # the second validation batch (seeds 100 014-100 027) at the hidden scenes' density
     "val-5m-b": "generalize-val-5m-b-shape-check.json",
+    # the dome batch: the next 6 validation seeds of each family with domes (100 028-100 068)
+    "val-domes": "generalize-val-domes-tree-v39.json",
     # diagnose_generalize.py --density over the 1 M, 3 M and 10 M rows (tree seed 0)
-    "density": "generalize-val-density-visible-shape-check.json",
-    "val": "generalize-val-shape-check.json",
+    "density": "generalize-val-density-visible-tree-v39.json",
+    "val": "generalize-val-tree-v39.json",
     # the latest run with the paper's energy path (other runs pass --no-energy; it runs with
     # tree.verify=false, so tree-v25 and tree-v26 did not change it)
     "test-energy": "generalize-test-group300k.json",
@@ -129,7 +131,8 @@ def generalize_figures() -> str:
     rows = [("test", "test split"), ("test-5m", "test split, 5 M points"),
             ("val", "validation"), ("val-4m", "validation, 4 M points"), ("val-1m", "validation, 1 M points"),
             ("val-3m", "validation, 3 M points"), ("val-10m", "validation, 10 M points"),
-            ("val-5m-b", "validation, second batch, 5 M points")]
+            ("val-5m-b", "validation, second batch, 5 M points"),
+            ("val-domes", "validation, dome batch (4 families)")]
     out = ["| sites | seeds | points per site | code | arch | dome | minaret | pillar | all found | precision | source |",
            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for key, label in rows:

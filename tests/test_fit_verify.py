@@ -48,6 +48,18 @@ def test_thresholds_are_chosen_to_drop_a_false_element_and_keep_a_true_one():
     ts, f1 = fit_verify.choose_thresholds([row], probs, start, [0.1, 0.2, 0.5, 0.95])
     assert f1 == 1.0
     assert ts.tolist() == [0.1, 0.5, 0.1, 0.1]  # 0.5 drops the tree; 0.95 would drop the dome too
+    ts, f1 = fit_verify.choose_thresholds([row], probs, start, [0.1, 0.2, 0.5, 0.95], keep=frozenset({dome}))
+    assert ts.tolist() == [0.1, 0.1, 0.1, 0.1]
+    assert f1 < 1.0
+
+
+@pytest.mark.parametrize(("args", "message"), [(["--choose-thresholds", "--keep", "wall"], "--keep 'wall'"),
+                                           (["--keep", "dome"], "--keep: only with --choose-thresholds")])
+def test_keep_names_element_classes_and_needs_the_choice(args, message, tmp_path, capsys):
+    with pytest.raises(SystemExit) as e:
+        fit_verify.main(["fit", str(tmp_path), "--out", str(tmp_path / "c.json"), *args])
+    assert e.value.code == 2
+    assert message in capsys.readouterr().err
 
 
 def test_fit_chooses_and_writes_the_thresholds_of_its_out_of_fold_decisions(tmp_path, monkeypatch):
@@ -90,3 +102,9 @@ def test_fit_chooses_and_writes_the_thresholds_of_its_out_of_fold_decisions(tmp_
     assert check.info["thresholds"]["start_f1"] < 0.7
     assert check.info["thresholds"]["f1"] == 1.0
     assert check.thresholds().tolist() == [0.5, 0.5, 0.5, 0.5]
+    # --keep holds the named classes at their start
+    assert fit_verify.main(["fit", str(tmp_path), "--out", str(out), "--threshold", "0",
+                            "--choose-thresholds", "0", "0.5", "--keep", "arch", "pillar"]) == 0
+    check = load_verify_model(out)
+    assert check.thresholds().tolist() == [0.0, 0.5, 0.5, 0.0]
+    assert check.info["thresholds"]["kept"] == ["arch", "pillar"]
