@@ -54,7 +54,7 @@ LATEST = {
     # tree.verify=false, so tree-v25 and tree-v26 did not change it)
     "test-energy": "generalize-test-group300k.json",
     # docs/results.md: the paper's five sites, a report set (hollowtree evaluate --seeds 3)
-    "five-sites": "five-sites-10m-tree-v37.json",
+    "five-sites": "five-sites-10m-tree-v39.json",
 }
 
 #: What each validation variant of docs/decisions/method.md was (``generalize-val-4m*.json``;
