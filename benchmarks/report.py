@@ -44,7 +44,7 @@ LATEST = {
     "val-10m": "generalize-val-density-10m-tree-v39.json",
     "val-3m": "generalize-val-density-3m-tree-v39.json",
     # the second validation batch (seeds 100 014-100 027) at the hidden scenes' density
-    "val-5m-b": "generalize-val-5m-b-shape-check.json",
+    "val-5m-b": "generalize-val-5m-b-tree-v39.json",
     # the dome batch: the next 6 validation seeds of each family with domes (100 028-100 068)
     "val-domes": "generalize-val-domes-tree-v39.json",
     # diagnose_generalize.py --density over the 1 M, 3 M and 10 M rows (tree seed 0)
