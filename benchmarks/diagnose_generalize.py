@@ -5,7 +5,8 @@ script reads each input's ground truth beside the run's labels and puts every ar
 minaret and pillar in one bucket of :func:`scenes.metrics.loss_buckets`: found, tiny,
 wrong class (cut out right, named wrong), leaves not grouped (cut out in pieces), coarse
 fragments (no coarse segment holds half of it) or not cut out (one segment holds most of
-it and nothing separated it). It prints a table per class and what the wrong classes were.
+it and nothing separated it). It prints a table per class and what the wrong classes were, and of those the ones the
+element check (tree/verify.py) made: the class of the instance before it and after.
 
 Run: ``python benchmarks/diagnose_generalize.py out/generalize [--tiny 100] [--json PATH]``;
 ``--flips A.json B.json`` compares two such outputs of the same scans (two tile layouts);
@@ -49,6 +50,43 @@ def _element_names(scan: Path) -> dict[int, str]:
     return dict(zip(t["instance"], t["name"], strict=True))
 
 
+def classes_before_check(node_key: np.ndarray, node_instance: np.ndarray, node_points: np.ndarray,
+                         table_key: np.ndarray, table_class: np.ndarray) -> dict[int, int]:
+    """Instance -> its class before the element check: the class most of its nodes' points had
+    in the tree's batch tables (``table_*``, before the check) for the instance nodes of
+    ``tree/nodes.parquet`` (``node_*``: final instance ids, after the check); ``*_key`` identify
+    a node (segment, node id) in both.
+
+    >>> classes_before_check(np.array([[1, 0], [1, 1], [2, 0]]), np.array([7, 7, 0]), np.array([10, 30, 5]),
+    ...                      np.array([[1, 1], [1, 0], [2, 0]]), np.array([5, 8, 2]))
+    {7: 5}
+    """
+    order = {tuple(k): c for k, c in zip(table_key.tolist(), table_class.tolist(), strict=True)}
+    votes: dict[int, Counter] = defaultdict(Counter)
+    for k, i, n in zip(node_key.tolist(), node_instance.tolist(), node_points.tolist(), strict=True):
+        if i > 0 and tuple(k) in order:
+            votes[int(i)][int(order[tuple(k)])] += int(n)
+    return {i: v.most_common(1)[0][0] for i, v in votes.items()}
+
+
+def _before_check(store: RunStore) -> dict[int, int]:
+    """:func:`classes_before_check` of a store's tree (empty without one)."""
+    import pyarrow as pa
+
+    if not store.has_file("tree/nodes.parquet"):
+        return {}
+    nodes = store.read_table("tree/nodes.parquet")
+    tables = [store.read_table(f"tree/tables/{b}.parquet") for b in range(len(store.attrs["stages"]["tree"]["batches"]))]
+    t = pa.concat_tables(tables)
+
+    def key(x):
+        return np.column_stack([np.asarray(x.column(c).to_numpy(), dtype=np.int64) for c in ("segment", "node_id")])
+
+    return classes_before_check(key(nodes), np.asarray(nodes.column("instance").to_numpy()),
+                                np.asarray(nodes.column("n_points").to_numpy()), key(t),
+                                np.asarray(t.column("class_id").to_numpy()))
+
+
 def diagnose_store(store_path: Path, *, tiny: int) -> tuple[list[dict], list[dict]]:
     """:func:`scenes.metrics.loss_buckets` and :func:`scenes.metrics.false_positives` of one store."""
     store = RunStore.open(str(store_path))
@@ -63,7 +101,12 @@ def diagnose_store(store_path: Path, *, tiny: int) -> tuple[list[dict], list[dic
     classes = tuple(int(c) for c in ELEMENT_CLASSES)
     rows = loss_buckets(gc, gi, pc, pi, (seg >> np.uint64(LEAF_BITS)).astype(np.int64), seg.astype(np.int64),
                         classes=classes, tiny=tiny)
+    before = _before_check(store)
     for r in rows:
+        if r["bucket"] == "wrong class":  # the instance covering most of it, and its class before the check
+            ids, counts = np.unique(pi[(gi == r["instance"]) & (gc == r["class"]) & (pi > 0)], return_counts=True)
+            if len(ids) and int(ids[np.argmax(counts)]) in before:
+                r["before_check"] = ClassId(before[int(ids[np.argmax(counts)])]).label
         r["class"], r["predicted"] = ClassId(r["class"]).label, ClassId(r["predicted"]).label
     fps = false_positives(gc, gi, pc, pi, classes=classes)
     names = _element_names(Path(src[0]["path"]))
@@ -166,6 +209,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{c:<9}" + "".join(f"{cnt[b]:>22}" for b in LOSS_BUCKETS))
     wrong = Counter((r["class"], r["predicted"]) for r in rows if r["bucket"] == "wrong class")
     print("wrong class (truth -> predicted):", ", ".join(f"{a}->{b} {n}" for (a, b), n in wrong.most_common()))
+    checked = Counter((r["class"], r["before_check"], r["predicted"]) for r in rows
+                      if r["bucket"] == "wrong class" and r.get("before_check", r["predicted"]) != r["predicted"])
+    print("of them made by the element check (truth: before -> after):",
+          ", ".join(f"{a}: {b}->{c} {n}" for (a, b, c), n in checked.most_common()) or "none")
     kinds = ("piece", "other element", "no element", "mixed")
     fp_table: dict[str, Counter] = defaultdict(Counter)
     for r in fps:
