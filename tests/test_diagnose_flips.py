@@ -60,3 +60,18 @@ def test_density_names_a_file_that_is_not_a_diagnosis(tmp_path, capsys):
         diagnose.main(["--density", str(bad)])
     assert e.value.code == 2
     assert "--density " + str(bad) + ": not a --json output" in capsys.readouterr().err
+
+
+def test_classes_before_the_check_come_from_the_batch_tables():
+    """An instance's class before the element check: the batch tables' class of its nodes,
+    weighted by their points (the nodes table holds the class after the check)."""
+    import numpy as np
+
+    node_key = np.array([[1, 0], [1, 1], [1, 2], [2, 0], [3, 0]])
+    node_inst = np.array([7, 7, 7, 0, 9])
+    node_points = np.array([10, 30, 15, 5, 40])
+    table_key = np.array([[1, 2], [1, 1], [1, 0], [2, 0]])  # node (3, 0) is in no table
+    table_class = np.array([8, 5, 5, 2])
+    assert diagnose.classes_before_check(node_key, node_inst, node_points, table_key, table_class) == {7: 5}
+    assert diagnose.classes_before_check(node_key, node_inst, np.array([10, 3, 15, 5, 40]), table_key,
+                                         table_class) == {7: 8}
