@@ -5,8 +5,8 @@ script reads each input's ground truth beside the run's labels and puts every ar
 minaret and pillar in one bucket of :func:`scenes.metrics.loss_buckets`: found, tiny,
 wrong class (cut out right, named wrong), leaves not grouped (cut out in pieces), coarse
 fragments (no coarse segment holds half of it) or not cut out (one segment holds most of
-it and nothing separated it). It prints a table per class and what the wrong classes were, and of those the ones the
-element check (tree/verify.py) made: the class of the instance before it and after.
+it and nothing separated it). It prints a table per class, what the wrong classes were and
+which of them the element check (tree/verify.py) made (the instance's class before and after).
 
 Run: ``python benchmarks/diagnose_generalize.py out/generalize [--tiny 100] [--json PATH]``;
 ``--flips A.json B.json`` compares two such outputs of the same scans (two tile layouts);
@@ -76,8 +76,8 @@ def _before_check(store: RunStore) -> dict[int, int]:
     if not store.has_file("tree/nodes.parquet"):
         return {}
     nodes = store.read_table("tree/nodes.parquet")
-    tables = [store.read_table(f"tree/tables/{b}.parquet") for b in range(len(store.attrs["stages"]["tree"]["batches"]))]
-    t = pa.concat_tables(tables)
+    n_batches = len(store.attrs["stages"]["tree"]["batches"])
+    t = pa.concat_tables([store.read_table(f"tree/tables/{b}.parquet") for b in range(n_batches)])
 
     def key(x):
         return np.column_stack([np.asarray(x.column(c).to_numpy(), dtype=np.int64) for c in ("segment", "node_id")])
