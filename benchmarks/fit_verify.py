@@ -299,7 +299,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     f = sub.add_parser("fit")
-    f.add_argument("work", type=Path, nargs="+", help="bench_generalize work folders (training split) or stores")
+    f.add_argument("work", type=Path, nargs="*", help="bench_generalize work folders (training split) or stores")
     f.add_argument("--out", type=Path, required=True)
     f.add_argument("--threshold", type=float, default=0.5)
     f.add_argument("--class-threshold", nargs="+", default=[], metavar="CLASS=T",
@@ -319,7 +319,14 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     if a.cmd == "fit":
         per = {}
+        # ``--class-threshold`` takes every word after it: folders named after it are work folders
+        folders = [item for item in a.class_threshold if "=" not in item and Path(item).is_dir()]
+        a.work += [Path(item) for item in folders]
+        if not a.work:
+            ap.error("fit: name at least one work folder or store")
         for item in a.class_threshold:
+            if item in folders:
+                continue
             name, _, t = item.partition("=")
             try:
                 c, v = int(class_id(name)), float(t)

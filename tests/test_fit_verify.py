@@ -34,6 +34,21 @@ def test_a_class_threshold_must_name_an_element_class_and_a_share(item, tmp_path
     assert f"--class-threshold {item!r}" in capsys.readouterr().err
 
 
+def test_work_folders_named_after_the_class_thresholds_are_still_work_folders(tmp_path, monkeypatch, capsys):
+    a, b = tmp_path / "a", tmp_path / "b"
+    a.mkdir()
+    b.mkdir()
+    seen = {}
+    monkeypatch.setattr(fit_verify, "fit", lambda work, out, threshold, per, *rest: seen.update(work=work, per=per) or 0)
+    assert fit_verify.main(["fit", "--out", str(tmp_path / "c.json"), "--class-threshold", "dome=0.35",
+                            "pillar=0.4", str(a), str(b)]) == 0
+    assert seen == {"work": [a, b], "per": {5: 0.35, 7: 0.4}}
+    with pytest.raises(SystemExit) as e:
+        fit_verify.main(["fit", "--out", str(tmp_path / "c.json"), "--class-threshold", "dome=0.35"])
+    assert e.value.code == 2
+    assert "name at least one work folder" in capsys.readouterr().err
+
+
 def test_thresholds_are_chosen_to_drop_a_false_element_and_keep_a_true_one():
     import numpy as np
 
