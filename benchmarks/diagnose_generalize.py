@@ -13,7 +13,8 @@ Run: ``python benchmarks/diagnose_generalize.py out/generalize [--tiny 100] [--j
 ``--density SPARSE.json ... DENSE.json`` compares outputs of the same sites scanned at
 different densities (store names ``<site>-<points>.zarr``): recall over all elements and
 over those with at least ``--tiny`` points in every scan (a scanner's visibility, not the
-method, decides the rest).
+method, decides the rest). ``--posts`` adds, for each pillar not cut out, how its group's
+root was split and whether :func:`tree.posts.posts` on the whole group finds it.
 A tool for the validation split: reading it on test seeds to choose anything breaks the
 protocol of docs/generalize.md.
 """
@@ -116,6 +117,71 @@ def diagnose_store(store_path: Path, *, tiny: int) -> tuple[list[dict], list[dic
     return rows, fps
 
 
+#: ``nodes.parquet``'s sequence ids (docs/store.md).
+SEQUENCES = {1: "S1", 2: "S2", 3: "S3", 5: "gaps", 6: "parts", 7: "posts"}
+
+
+def post_cover(xyz: np.ndarray, member: np.ndarray) -> tuple[float, int]:
+    """The best point IoU of a post of :func:`tree.posts.posts` on ``xyz`` with the points
+    ``member`` (a boolean mask), and that post's index (-1 when none is found).
+
+    >>> rng = np.random.default_rng(0)
+    >>> cols = [rng.uniform(-0.15, 0.15, (800, 3)) * [1, 1, 0] + [x, 0, 0] + rng.uniform(0, 3, (800, 1)) * [0, 0, 1]
+    ...         for x in (0.0, 2.0, 4.0)]
+    >>> slab = rng.uniform(0, 1, (1500, 3)) * [5.0, 1.0, 0.3] + [-0.5, -0.5, 3.0]
+    >>> xyz = np.vstack(cols + [slab])
+    >>> iou, j = post_cover(xyz, np.arange(len(xyz)) // 800 == 1)
+    >>> round(iou, 2), j
+    (1.0, 1)
+    """
+    from hollowtree.tree.posts import posts
+
+    found = posts(xyz) if len(xyz) >= 2 else None
+    best, at = 0.0, -1
+    for j, c in enumerate(found or ()):
+        inter = int(member[c].sum())
+        iou = inter / (len(c) + int(member.sum()) - inter)
+        if iou > best:
+            best, at = iou, j
+    return best, at
+
+
+def posts_store(store_path: Path, lost: list[dict]) -> list[dict]:
+    """For each pillar of ``lost`` (:func:`diagnose_store`'s rows of one store) not cut out:
+    its group's root class and first split (``SEQUENCES``, ``none``), the best IoU of a post
+    found on the whole group (:func:`post_cover`) and HollowNet's class of that post."""
+    from hollownet.predict import Classifier
+
+    rows = [r for r in lost if r["class"] == "pillar" and r["bucket"] == "not cut out"]
+    if not rows:
+        return []
+    store = RunStore.open(str(store_path))
+    b = PointBlock.concat(read_blocks(store.attrs["sources"][0]["path"]))
+    group = (store.read_slice("labels/segment", 0, len(b)) >> np.uint64(LEAF_BITS)).astype(np.int64)
+    gc, gi = np.asarray(b.extra["gt_class"]), np.asarray(b.extra["gt_instance"])
+    nodes = store.read_table("tree/nodes.parquet")
+    seg, depth, seq, cls = (np.asarray(nodes.column(c).to_numpy()) for c in ("segment", "depth", "sequence",
+                                                                              "class_id"))
+    out = []
+    for r in rows:
+        member = (gc == int(ClassId.PILLAR)) & (gi == r["instance"])
+        g = np.bincount(group[member & (group >= 0)]).argmax() if (member & (group >= 0)).any() else -1
+        root = np.flatnonzero((seg == g) & (depth == 0))
+        first = sorted({int(x) for x in seq[(seg == g) & (depth == 1)]})
+        idx = np.flatnonzero(group == g)
+        iou, j = post_cover(b.xyz[idx], member[idx]) if g >= 0 else (0.0, -1)
+        post_class = ""
+        if j >= 0:
+            from hollowtree.tree.posts import posts
+
+            post_class = ClassId(int(Classifier.get().predict([b.xyz[idx][posts(b.xyz[idx])[j]]]).class_id[0])).label
+        out.append({"instance": r["instance"], "points": r["points"], "group_points": len(idx),
+                    "root": ClassId(int(cls[root[0]])).label if len(root) else "",
+                    "first_split": "+".join(SEQUENCES.get(x, str(x)) for x in first) or "none",
+                    "post_iou": round(float(iou), 3), "post_class": post_class})
+    return out
+
+
 def flips(a: list[dict], b: list[dict]) -> list[tuple[dict, dict]]:
     """The elements (``--json``'s ``lost`` rows of two runs of the same scans, e.g. two tile
     layouts) found in one run and not in the other, as pairs of their rows."""
@@ -168,6 +234,9 @@ def main(argv: list[str] | None = None) -> int:
                          "(sparsest first): recall over all elements and over those of at least --tiny "
                          "points in every scan")
     ap.add_argument("--tiny", type=int, default=100, help="elements under this many points are 'tiny'")
+    ap.add_argument("--posts", action="store_true",
+                    help="for each pillar not cut out: its group's root and first split, and the best "
+                         "post tree.posts.posts finds on the whole group")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
     if args.density:
@@ -196,11 +265,13 @@ def main(argv: list[str] | None = None) -> int:
     stores = []
     for p in args.paths:
         stores += sorted((p / "stores").glob("*.zarr")) if (p / "stores").is_dir() else [p]
-    rows, fps = [], []
+    rows, fps, post_rows = [], [], []
     for s in stores:
         lost, extra = diagnose_store(s, tiny=args.tiny)
         rows += [{"store": s.name, **r} for r in lost]
         fps += [{"store": s.name, **r} for r in extra]
+        if args.posts:
+            post_rows += [{"store": s.name, **r} for r in posts_store(s, lost)]
     table: dict[str, Counter] = defaultdict(Counter)
     for r in rows:
         table[r["class"]][r["bucket"]] += 1
@@ -224,8 +295,16 @@ def main(argv: list[str] | None = None) -> int:
     what = Counter((r["class"], r["kind"], r["truth"]) for r in fps)
     print("false positives (predicted, kind, truth of most points):",
           ", ".join(f"{a}/{k}/{t} {n}" for (a, k, t), n in what.most_common()))
+    if args.posts:
+        kinds = Counter((r["root"], r["first_split"], "post" if r["post_iou"] >= 0.5 else "no post",
+                         r["post_class"] if r["post_iou"] >= 0.5 else "") for r in post_rows)
+        print(f"\npillars not cut out: {len(post_rows)} (root class, its first split, a post of IoU >= 0.5 "
+              "on the whole group, HollowNet's class of it)")
+        for (root, first, post, pc), n in kinds.most_common():
+            print(f"  {n:4} {root or '?'}, {first}, {post}{', ' + pc if pc else ''}")
     if args.json:
-        args.json.write_text(json.dumps({"lost": rows, "false_positives": fps}, indent=0) + "\n")
+        out = {"lost": rows, "false_positives": fps} | ({"posts": post_rows} if args.posts else {})
+        args.json.write_text(json.dumps(out, indent=0) + "\n")
     return 0
 
 

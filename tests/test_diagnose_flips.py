@@ -75,3 +75,21 @@ def test_classes_before_the_check_come_from_the_batch_tables():
     assert diagnose.classes_before_check(node_key, node_inst, node_points, table_key, table_class) == {7: 5}
     assert diagnose.classes_before_check(node_key, node_inst, np.array([10, 3, 15, 5, 40]), table_key,
                                          table_class) == {7: 8}
+
+
+def test_post_cover_is_the_best_post_of_the_group_for_a_pillar():
+    np = pytest.importorskip("numpy")
+    rng = np.random.default_rng(0)
+    cols = [rng.uniform(-0.15, 0.15, (800, 3)) * [1, 1, 0] + [x, 0, 0] + rng.uniform(0, 3, (800, 1)) * [0, 0, 1]
+            for x in (0.0, 2.0, 4.0)]
+    slab = rng.uniform(0, 1, (1500, 3)) * [5.0, 1.0, 0.3] + [-0.5, -0.5, 3.0]
+    xyz = np.vstack(cols + [slab])
+    which = np.arange(len(xyz)) // 800
+    iou, j = diagnose.post_cover(xyz, which == 2)
+    assert j == 2
+    assert iou == pytest.approx(1.0, abs=0.01)
+    # the pillar with the slab above it: its post covers 800 of its 2 300 points
+    iou, j = diagnose.post_cover(xyz, (which == 0) | (which >= 3))
+    assert j == 0
+    assert iou == pytest.approx(800 / 2300, abs=0.01)
+    assert diagnose.post_cover(slab, np.ones(len(slab), bool)) == (0.0, -1)
