@@ -45,7 +45,8 @@ True
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,8 +73,10 @@ from hollowtree.scenes.shapes import ArcPath, StraightPath, box
 __all__ = ["FAMILIES", "GENERATOR", "SPLITS", "ScanDraw", "family_of", "procedural_site", "scan_draw", "split_seeds"]
 
 #: The generator's version, in the names of the scans made from it (a changed distribution
-#: makes new scans, never reuses old ones): ``gen-v2`` draws a site heading.
-GENERATOR = "gen-v2"
+#: makes new scans, never reuses old ones): ``gen-v2`` draws a site heading; ``gen-v3``
+#: stands every raised column on something (a pavilion's platform square to its columns,
+#: a facade's roof pavilions on a platform on the wall top, a monument's on its roof).
+GENERATOR = "gen-v3"
 
 #: The layout families, in the order :func:`family_of` cycles through them.
 FAMILIES = ("courtyard_mosque", "linear_facade", "fort", "pavilion_garden", "curved_facade", "monument", "ruins")
@@ -118,6 +121,7 @@ class _Site:
         self.ruin_rng = ruin_rng if ruin_rng is not None else np.random.default_rng(0)
         self.extent = np.array([[np.inf, np.inf], [-np.inf, -np.inf]])
         self.solid: list[tuple[float, float, float, float]] = []  # footprints no station stands in
+        self.fallen = False  # in a ruin: what is built now stood on something that fell
 
     def u(self, lo: float, hi: float) -> float:
         return float(self.rng.uniform(lo, hi))
@@ -129,23 +133,40 @@ class _Site:
     def pick(self, options: tuple) -> object:
         return options[int(self.rng.integers(len(options)))]
 
-    def add(self, mesh: TriMesh | list[TriMesh], cls: ClassId, name: str) -> None:
-        """Add one instance; in a ruin it may be missing or broken off at a random height."""
+    @contextmanager
+    def falling(self, fell: bool) -> Iterator[None]:
+        """In a ruin, what is built in this block is missing when ``fell``: it stood on
+        something missing or broken off (the layout's draws are made all the same)."""
+        before = self.fallen
+        self.fallen = before or fell
+        try:
+            yield
+        finally:
+            self.fallen = before
+
+    def add(self, mesh: TriMesh | list[TriMesh], cls: ClassId, name: str) -> bool:
+        """Add one instance; in a ruin it may be missing or broken off at a random height.
+        True when it stands whole (what stands on it can stand)."""
+        if self.fallen:
+            return False
         m = mesh if isinstance(mesh, TriMesh) else concat_meshes(mesh)
+        whole = True
         if self.ruin and cls != ClassId.GROUND:
             if self.ruin_rng.random() < 0.5 * self.ruin:
-                return
+                return False
             if self.ruin_rng.random() < self.ruin:
                 lo, hi = m.bounds()[:, 2]
                 cut = lo + (hi - lo) * float(self.ruin_rng.uniform(0.35, 0.9))
                 keep = m.vertices[m.faces][:, :, 2].max(axis=1) <= cut
                 if keep.sum() < 4:
-                    return
+                    return False
                 m = TriMesh(m.vertices, m.faces[keep])
+                whole = False
         bb = m.bounds()
         self.extent[0] = np.minimum(self.extent[0], bb[0, :2])
         self.extent[1] = np.maximum(self.extent[1], bb[1, :2])
         self.b.add(m, cls, name)
+        return whole
 
 
 def _dome(s: _Site, center: tuple[float, float, float], radius: float, name: str, *, drum: bool | None = None) -> None:
@@ -175,7 +196,7 @@ def _minaret(s: _Site, x: float, y: float, name: str, *, z0: float = 0.0, height
 
 
 def _pillar(s: _Site, x: float, y: float, height: float, name: str, *, z0: float = 0.0,
-            style: str | None = None, radius: float | None = None) -> None:
+            style: str | None = None, radius: float | None = None) -> bool:
     style = style or str(s.pick(("round", "round", "square", "clustered")))
     r = radius if radius is not None else s.u(0.15, 0.55)
     c = (x, y, z0)
@@ -185,16 +206,22 @@ def _pillar(s: _Site, x: float, y: float, height: float, name: str, *, z0: float
                          base_width=1.3 * r, capital_width=1.2 * r, base_height=0.2, capital_height=0.25)
                   for dx, dy in ((d, 0), (-d, 0), (0, d), (0, -d))]
         shafts.append(box((x - 1.6 * r, y - 1.6 * r, z0), (x + 1.6 * r, y + 1.6 * r, z0 + 0.3)))
-        s.add(shafts, ClassId.PILLAR, name)
-        return
+        return s.add(shafts, ClassId.PILLAR, name)
     n = 4 if style == "square" else 20
-    s.add(pillar(center=c, height=height, radius=r, n_segments=n, base_width=2.6 * r + 0.1,
+    return s.add(pillar(center=c, height=height, radius=r, n_segments=n, base_width=2.6 * r + 0.1,
                  capital_width=2.4 * r + 0.1, base_height=min(0.3, 0.08 * height),
                  capital_height=min(0.35, 0.09 * height), entasis=s.u(0.0, 0.15)), ClassId.PILLAR, name)
 
 
-def _pavilion(s: _Site, x: float, y: float, name: str, *, z0: float = 0.0, size: float | None = None) -> None:
-    """A chattri as its parts: columns (pillars), the slab they carry (roof), the dome on it."""
+def _pavilion(s: _Site, x: float, y: float, name: str, *, z0: float = 0.0, size: float | None = None,
+              platform: bool = False) -> None:
+    """A chattri as its parts: columns (pillars), the slab they carry (roof), the dome on it.
+
+    On the ground it stands on a platform (roof) in 60 % of the sites; with ``platform`` it
+    always does, at any ``z0`` (a roof pavilion on a wall top it overhangs). The platform is
+    square to the columns and half a metre wider, so that every column stands on it. In a
+    ruin a fallen platform takes the pavilion with it, and the slab and dome stand on at
+    least three whole columns."""
     half = size if size is not None else s.u(1.2, 3.5)
     n_side = s.i(2, 3)
     post_h = s.u(1.8, 4.0)
@@ -207,22 +234,27 @@ def _pavilion(s: _Site, x: float, y: float, name: str, *, z0: float = 0.0, size:
             if 0 < i < n_side - 1 and 0 < j < n_side - 1:
                 continue
             ring.add((i, j))
-    if z0 == 0.0 and s.rng.random() < 0.6:  # a platform
+    fell = False
+    if platform or (z0 == 0.0 and s.rng.random() < 0.6):
         pz = s.u(0.3, 1.2)
         p = half + 0.5
-        s.add(roof_slab([(x - p, y - p), (x + p, y - p), (x + p, y + p), (x - p, y + p)], z=pz, thickness=pz),
-              ClassId.ROOF, f"{name} platform")
-        z0 = pz
-    for k, (i, j) in enumerate(sorted(ring)):
-        u = -half + 2 * half * i / (n_side - 1)
-        v = -half + 2 * half * j / (n_side - 1)
-        _pillar(s, x + c * u - sn * v, y + sn * u + c * v, post_h, f"{name} column {k + 1}", z0=z0,
-                style=str(s.pick(("round", "square"))), radius=r)
+        square = [(x + c * u - sn * v, y + sn * u + c * v) for u, v in ((-p, -p), (p, -p), (p, p), (-p, p))]
+        fell = not s.add(roof_slab(square, z=z0 + pz, thickness=pz), ClassId.ROOF, f"{name} platform")
+        z0 += pz
+    standing = 0
+    with s.falling(fell):
+        for k, (i, j) in enumerate(sorted(ring)):
+            u = -half + 2 * half * i / (n_side - 1)
+            v = -half + 2 * half * j / (n_side - 1)
+            standing += _pillar(s, x + c * u - sn * v, y + sn * u + c * v, post_h, f"{name} column {k + 1}", z0=z0,
+                                style=str(s.pick(("round", "square"))), radius=r)
     t = s.u(0.2, 0.45)
     e = half + s.u(0.2, 0.6)
     corners = [(x + c * u - sn * v, y + sn * u + c * v) for u, v in ((-e, -e), (e, -e), (e, e), (-e, e))]
-    s.add(roof_slab(corners, z=z0 + post_h + t, thickness=t), ClassId.ROOF, f"{name} slab")
-    _dome(s, (x, y, z0 + post_h + t), half * s.u(0.8, 1.05), f"{name} dome", drum=s.rng.random() < 0.3)
+    with s.falling(standing < 3):
+        slab = s.add(roof_slab(corners, z=z0 + post_h + t, thickness=t), ClassId.ROOF, f"{name} slab")
+        with s.falling(not slab):
+            _dome(s, (x, y, z0 + post_h + t), half * s.u(0.8, 1.05), f"{name} dome", drum=s.rng.random() < 0.3)
 
 
 def _gateway(s: _Site, path: StraightPath, u0: float, width: float, height: float, name: str,
@@ -290,8 +322,9 @@ def _clutter(s: _Site, x0: float, x1: float, y0: float, y1: float, n: int) -> No
 
 
 # --------------------------------------------------------------------------- layouts
-def _hall(s: _Site, x0: float, x1: float, y0: float, y1: float, name: str) -> float:
-    """A walled hall with a flat roof and 1-3 domes on it; returns the roof height."""
+def _hall(s: _Site, x0: float, x1: float, y0: float, y1: float, name: str) -> tuple[float, bool]:
+    """A walled hall with a flat roof and 1-3 domes on it; returns the roof height and
+    whether the roof stands whole (in a ruin)."""
     h = s.u(5.0, 14.0)
     t = s.u(0.6, 1.8)
     s.solid.append((x0 - t, x1 + t, y0 - t, y1 + t))
@@ -302,12 +335,13 @@ def _hall(s: _Site, x0: float, x1: float, y0: float, y1: float, name: str) -> fl
     w = (x1 - x0) / n_domes
     radius = min(0.42 * w, 0.42 * (y1 - y0))
     holes = [(x0 + (k + 0.5) * w, 0.5 * (y0 + y1), 0.85 * radius) for k in range(n_domes)]
-    s.add(roof_slab([(x0, y0), (x1, y0), (x1, y1), (x0, y1)], z=h + 0.4, thickness=0.4, holes=holes),
-          ClassId.ROOF, f"{name} roof")
-    for k, (hx, hy, _) in enumerate(holes):
-        _dome(s, (hx, hy, h + 0.4), radius * (1.0 if k == n_domes // 2 else s.u(0.6, 1.0)), f"{name} dome {k + 1}",
-              drum=s.rng.random() < 0.7)
-    return h + 0.4
+    whole = s.add(roof_slab([(x0, y0), (x1, y0), (x1, y1), (x0, y1)], z=h + 0.4, thickness=0.4, holes=holes),
+                  ClassId.ROOF, f"{name} roof")
+    with s.falling(not whole):
+        for k, (hx, hy, _) in enumerate(holes):
+            _dome(s, (hx, hy, h + 0.4), radius * (1.0 if k == n_domes // 2 else s.u(0.6, 1.0)),
+                  f"{name} dome {k + 1}", drum=s.rng.random() < 0.7)
+    return h + 0.4, whole
 
 
 def _courtyard_mosque(s: _Site) -> None:
@@ -331,13 +365,14 @@ def _courtyard_mosque(s: _Site) -> None:
             _arcade_storeys(s, path, f"{side} arcade", storeys=s.i(1, 2))
         else:
             s.add(wall(path, height=s.u(3.0, 8.0), thickness=s.u(0.5, 1.5)), ClassId.WALL, f"{side} wall")
-    roof = _hall(s, -w / 2, w / 2, d / 2 - hall_d, d / 2, "prayer hall")
+    roof, roof_whole = _hall(s, -w / 2, w / 2, d / 2 - hall_d, d / 2, "prayer hall")
     corners = [(-w / 2, d / 2), (w / 2, d / 2), (-w / 2, -d / 2), (w / 2, -d / 2)]
     for k, (x, y) in enumerate(corners[: int(s.pick((0, 2, 2, 4)))]):
         _minaret(s, x + np.sign(x) * 2.5, y + np.sign(y) * 2.5, f"minaret {k + 1}")
     for k in range(s.i(0, 2)):  # roof pavilions at the hall's front corners
-        _pavilion(s, (-1) ** k * (w / 2 - 2.5), d / 2 - hall_d + 2.5, f"roof pavilion {k + 1}", z0=roof,
-                  size=s.u(1.0, 1.8))
+        with s.falling(not roof_whole):
+            _pavilion(s, (-1) ** k * (w / 2 - 2.5), d / 2 - hall_d + 2.5, f"roof pavilion {k + 1}", z0=roof,
+                      size=s.u(1.0, 1.8))
 
 
 def _linear_facade(s: _Site) -> None:
@@ -350,8 +385,8 @@ def _linear_facade(s: _Site) -> None:
         _minaret(s, end * (0.5 * length + 3.0) * c, end * (0.5 * length + 3.0) * sn, f"tower {k + 1}")
     for k in range(s.i(0, 3)):
         f = s.u(-0.4, 0.4)
-        _pavilion(s, f * length * c + 1.5 * sn, f * length * sn - 1.5 * c, f"roof pavilion {k + 1}", z0=top,
-                  size=s.u(0.9, 1.6))
+        _pavilion(s, f * length * c, f * length * sn, f"roof pavilion {k + 1}", z0=top, size=s.u(0.9, 1.6),
+                  platform=True)
 
 
 def _fort(s: _Site) -> None:
@@ -458,16 +493,19 @@ def _monument(s: _Site) -> None:
         else:
             s.add(wall(path, height=h, thickness=1.2, z0=plinth), ClassId.WALL, f"{side} wall")
     radius = half * s.u(0.55, 0.85)
-    s.add(roof_slab([(-half, -half), (half, -half), (half, half), (-half, half)], z=plinth + h + 0.5, thickness=0.5,
-                    holes=[(0.0, 0.0, 0.85 * radius)]), ClassId.ROOF, "roof")
-    _dome(s, (0.0, 0.0, plinth + h + 0.5), radius, "main dome", drum=s.rng.random() < 0.8)
+    roof = s.add(roof_slab([(-half, -half), (half, -half), (half, half), (-half, half)], z=plinth + h + 0.5,
+                           thickness=0.5, holes=[(0.0, 0.0, 0.85 * radius)]), ClassId.ROOF, "roof")
+    with s.falling(not roof):
+        _dome(s, (0.0, 0.0, plinth + h + 0.5), radius, "main dome", drum=s.rng.random() < 0.8)
     if s.rng.random() < 0.6:
         for k, (x, y) in enumerate(((-1, -1), (1, -1), (1, 1), (-1, 1))):
             _minaret(s, x * (p - 2.5), y * (p - 2.5), f"minaret {k + 1}", z0=plinth, height=s.u(12.0, 35.0))
     for k in range(int(s.pick((0, 0, 2, 4)))):
         x, y = ((-1, -1), (1, 1), (1, -1), (-1, 1))[k]
-        _pavilion(s, x * (half - 2.0), y * (half - 2.0), f"roof pavilion {k + 1}", z0=plinth + h + 0.5,
-                  size=s.u(0.8, 1.5))
+        size = s.u(0.8, 1.5)  # every column on the roof, clear of its edge
+        with s.falling(not roof):
+            _pavilion(s, x * (half - 0.5 - size * np.sqrt(2)), y * (half - 0.5 - size * np.sqrt(2)),
+                      f"roof pavilion {k + 1}", z0=plinth + h + 0.5, size=size)
 
 
 _LAYOUTS: dict[str, Callable[[_Site], None]] = {
