@@ -134,9 +134,16 @@ def post_cover(xyz: np.ndarray, member: np.ndarray) -> tuple[float, int]:
     >>> round(iou, 2), j
     (1.0, 1)
     """
+    return _best_post(_posts(xyz), member)
+
+
+def _posts(xyz: np.ndarray) -> tuple | None:
     from hollowtree.tree.posts import posts
 
-    found = posts(xyz) if len(xyz) >= 2 else None
+    return posts(xyz) if len(xyz) >= 2 else None
+
+
+def _best_post(found: tuple | None, member: np.ndarray) -> tuple[float, int]:
     best, at = 0.0, -1
     for j, c in enumerate(found or ()):
         inter = int(member[c].sum())
@@ -162,19 +169,20 @@ def posts_store(store_path: Path, lost: list[dict]) -> list[dict]:
     nodes = store.read_table("tree/nodes.parquet")
     seg, depth, seq, cls = (np.asarray(nodes.column(c).to_numpy()) for c in ("segment", "depth", "sequence",
                                                                               "class_id"))
-    out = []
+    out: list[dict] = []
+    found: dict[int, tuple | None] = {}
     for r in rows:
         member = (gc == int(ClassId.PILLAR)) & (gi == r["instance"])
         g = np.bincount(group[member & (group >= 0)]).argmax() if (member & (group >= 0)).any() else -1
         root = np.flatnonzero((seg == g) & (depth == 0))
         first = sorted({int(x) for x in seq[(seg == g) & (depth == 1)]})
         idx = np.flatnonzero(group == g)
-        iou, j = post_cover(b.xyz[idx], member[idx]) if g >= 0 else (0.0, -1)
+        if g not in found:  # the group's posts, once for all its pillars
+            found[g] = _posts(b.xyz[idx]) if g >= 0 else None
+        iou, j = _best_post(found[g], member[idx])
         post_class = ""
         if j >= 0:
-            from hollowtree.tree.posts import posts
-
-            post_class = ClassId(int(Classifier.get().predict([b.xyz[idx][posts(b.xyz[idx])[j]]]).class_id[0])).label
+            post_class = ClassId(int(Classifier.get().predict([b.xyz[idx][found[g][j]]]).class_id[0])).label
         out.append({"instance": r["instance"], "points": r["points"], "group_points": len(idx),
                     "root": ClassId(int(cls[root[0]])).label if len(root) else "",
                     "first_split": "+".join(SEQUENCES.get(x, str(x)) for x in first) or "none",
