@@ -228,6 +228,10 @@ def _pavilion(s: _Site, x: float, y: float, name: str, *, z0: float = 0.0, size:
     r = s.u(0.1, 0.25)
     yaw = s.u(0.0, np.pi / 2)
     c, sn = np.cos(yaw), np.sin(yaw)
+
+    def at(u: float, v: float) -> tuple[float, float]:  # the pavilion's (u, v) in the site
+        return x + c * u - sn * v, y + sn * u + c * v
+
     ring = set()
     for i in range(n_side):
         for j in range(n_side):
@@ -238,7 +242,7 @@ def _pavilion(s: _Site, x: float, y: float, name: str, *, z0: float = 0.0, size:
     if platform or (z0 == 0.0 and s.rng.random() < 0.6):
         pz = s.u(0.3, 1.2)
         p = half + 0.5
-        square = [(x + c * u - sn * v, y + sn * u + c * v) for u, v in ((-p, -p), (p, -p), (p, p), (-p, p))]
+        square = [at(u, v) for u, v in ((-p, -p), (p, -p), (p, p), (-p, p))]
         fell = not s.add(roof_slab(square, z=z0 + pz, thickness=pz), ClassId.ROOF, f"{name} platform")
         z0 += pz
     standing = 0
@@ -246,11 +250,11 @@ def _pavilion(s: _Site, x: float, y: float, name: str, *, z0: float = 0.0, size:
         for k, (i, j) in enumerate(sorted(ring)):
             u = -half + 2 * half * i / (n_side - 1)
             v = -half + 2 * half * j / (n_side - 1)
-            standing += _pillar(s, x + c * u - sn * v, y + sn * u + c * v, post_h, f"{name} column {k + 1}", z0=z0,
+            standing += _pillar(s, *at(u, v), post_h, f"{name} column {k + 1}", z0=z0,
                                 style=str(s.pick(("round", "square"))), radius=r)
     t = s.u(0.2, 0.45)
     e = half + s.u(0.2, 0.6)
-    corners = [(x + c * u - sn * v, y + sn * u + c * v) for u, v in ((-e, -e), (e, -e), (e, e), (-e, e))]
+    corners = [at(u, v) for u, v in ((-e, -e), (e, -e), (e, e), (-e, e))]
     with s.falling(standing < 3):
         slab = s.add(roof_slab(corners, z=z0 + post_h + t, thickness=t), ClassId.ROOF, f"{name} slab")
         with s.falling(not slab):
