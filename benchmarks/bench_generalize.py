@@ -17,7 +17,9 @@ on it through ``hollowtree evaluate``, and reports, per element class and per fa
     the coarse segments alone, each classified whole by HollowNet (the baseline).
 
 An element counts as found at IoU >= 0.5 (greedy one-to-one matching); recall is found
-/ ground truth, precision matched predictions / predictions. Scans are kept under
+/ ground truth, precision matched predictions / predictions; ``gt_visible`` and
+``found_visible`` count only the elements of ``scenes.metrics.VISIBLE_POINTS`` points or
+more (those the scan shows). Scans are kept under
 ``--work`` and reused by a later run with the same arguments.
 
 Run: ``python benchmarks/bench_generalize.py [--split test] [--sites 30] [--family F ...]
@@ -44,6 +46,7 @@ from hollowtree.classes import ELEMENT_CLASSES, ClassId  # noqa: E402
 from hollowtree.pipeline.coarse import COARSE_ALGORITHM  # noqa: E402
 from hollowtree.pipeline.evaluate import evaluate_inputs, machine  # noqa: E402
 from hollowtree.pipeline.tree_stage import TREE_ALGORITHM  # noqa: E402
+from hollowtree.scenes.metrics import VISIBLE_POINTS  # noqa: E402
 from hollowtree.scenes.procedural import FAMILIES, GENERATOR, family_of, scan_draw, split_seeds  # noqa: E402
 from hollowtree.scenes.synth import synth  # noqa: E402
 from hollowtree.tiling.grid import GRID_ALGORITHM  # noqa: E402
@@ -149,6 +152,9 @@ def main(argv: list[str] | None = None) -> int:
                     bucket["found"] += s.n_found
                     bucket["pred"] += s.n_pred
                     bucket["matched"] += s.n_pred_matched
+                    if s.n_gt_visible is not None:  # elements of VISIBLE_POINTS points or more
+                        bucket["gt_visible"] = bucket.get("gt_visible", 0) + s.n_gt_visible
+                        bucket["found_visible"] = bucket.get("found_visible", 0) + s.n_found_visible
             if label == "tree":
                 sites.append({"seed": seed, "family": f, "input": r.input, "n_points": r.n_points,
                               "pipeline_seconds": r.pipeline_seconds})
@@ -171,8 +177,11 @@ def main(argv: list[str] | None = None) -> int:
                      sum(c["matched"] for c in per.values()), sum(c["pred"] for c in per.values()))
                  for m, per in total.items()}
     for m, (fd, gt, mt, pr) in all_found.items():
+        vis = [c for c in total[m].values() if "gt_visible" in c]
+        fv, gv = sum(c["found_visible"] for c in vis), sum(c["gt_visible"] for c in vis)
         print(f"{m}: {fd} of {gt} elements found ({100 * fd / max(gt, 1):.1f} %), precision "
-              f"{100 * mt / max(pr, 1):.1f} %")
+              f"{100 * mt / max(pr, 1):.1f} %; of those of {VISIBLE_POINTS} points or more, {fv} of {gv} "
+              f"({100 * fv / max(gv, 1):.1f} %)")
     wall = time.perf_counter() - t0
     print(f"{wall:.0f} s ({t_scan:.0f} s of scanning)")
     out = args.json or REPO / "benchmarks" / "results" / f"generalize-{args.split}.json"

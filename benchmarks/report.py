@@ -133,15 +133,20 @@ def generalize_figures() -> str:
             ("val-3m", "validation, 3 M points"), ("val-10m", "validation, 10 M points"),
             ("val-5m-b", "validation, second batch, 5 M points"),
             ("val-domes", "validation, dome batch (4 families)")]
-    out = ["| sites | seeds | points per site | code | arch | dome | minaret | pillar | all found | precision | source |",
-           "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    out = ["| sites | seeds | points per site | code | arch | dome | minaret | pillar | all found | precision "
+           "| found, 100 points or more | source |",
+           "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for key, label in rows:
         d = _load(LATEST[key])
         t = d["totals"]["tree"]
         fd, gt, m, p = _found(t)
         per = [f"{t[c]['found']} / {t[c]['gt']}" for c in ELEMENTS]
+        vis = "-"  # runs before the visible elements were counted
+        if all("gt_visible" in t[c] for c in ELEMENTS):
+            fv, gv = _sum(t, "found_visible"), _sum(t, "gt_visible")
+            vis = f"{fv} / {gv} ({_pct(fv, gv)})"
         out.append(f"| {label} | {_seeds(d)} | {_points(d)} | {_code(d)} | " + " | ".join(per)
-                   + f" | **{fd} / {gt} ({_pct(fd, gt)})** | **{_pct(m, p)}** | `{LATEST[key]}` |")
+                   + f" | **{fd} / {gt} ({_pct(fd, gt)})** | **{_pct(m, p)}** | {vis} | `{LATEST[key]}` |")
     return "\n".join(out)
 
 

@@ -46,11 +46,14 @@ import numpy.typing as npt
 
 from hollowtree.classes import CLASS_NAMES, NUM_CLASSES, class_id
 
-__all__ = ["LOSS_BUCKETS", "LabelCounts", "ClassScore", "Evaluation", "count_labels", "evaluate_labels", "loss_buckets",
+__all__ = ["LOSS_BUCKETS", "VISIBLE_POINTS", "LabelCounts", "ClassScore", "Evaluation", "count_labels", "evaluate_labels", "loss_buckets",
            "score_counts"]
 
 _U64 = npt.NDArray[np.uint64]
 _I64 = npt.NDArray[np.int64]
+#: A ground-truth element of fewer points than this is one the scan hardly shows
+#: (:func:`loss_buckets` calls it tiny); :class:`ClassScore` also counts the others apart.
+VISIBLE_POINTS = 100
 #: Instance ids must stay below this so that ``id * num_classes + class`` fits in uint64.
 _MAX_INSTANCE = 2**58
 
@@ -204,7 +207,9 @@ def _pct(num: int, den: int) -> float | None:
 class ClassScore:
     """The scores of one class (percentages; None where undefined, printed NA).
 
-    ``n_gt``/``n_found``/``accuracy_pct`` are the paper's GT/AG/Acc columns.
+    ``n_gt``/``n_found``/``accuracy_pct`` are the paper's GT/AG/Acc columns;
+    ``n_gt_visible``/``n_found_visible`` count only the ground-truth instances of at least
+    :data:`VISIBLE_POINTS` points (None in scores saved before they were counted).
     """
 
     class_id: int
@@ -218,6 +223,8 @@ class ClassScore:
     gt_points: int
     pred_points: int
     iou_pct: float | None
+    n_gt_visible: int | None = None
+    n_found_visible: int | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
@@ -293,6 +300,8 @@ def score_counts(counts: LabelCounts, *, iou_threshold: float = 0.5) -> Evaluati
     >>> a = ev.score("arch")
     >>> a.n_gt, a.n_found, a.n_pred, a.precision_pct, a.iou_pct
     (1, 1, 2, 50.0, 100.0)
+    >>> a.n_gt_visible, a.n_found_visible  # an arch of 4 points: under VISIBLE_POINTS
+    (0, 0)
     """
     if not 0.0 < iou_threshold <= 1.0:
         raise ValueError(f"The 'iou_threshold' parameter of score_counts must be a float in the range (0.0, 1.0]. "
@@ -307,6 +316,10 @@ def score_counts(counts: LabelCounts, *, iou_threshold: float = 0.5) -> Evaluati
     matched_class = (counts.pair_gt[kept] % kk).astype(np.int64)
     found = np.bincount(matched_class, minlength=k)
     n_gt = np.bincount((counts.gt_keys % kk).astype(np.int64), minlength=k)
+    visible = counts.gt_sizes >= VISIBLE_POINTS
+    n_gt_vis = np.bincount((counts.gt_keys[visible] % kk).astype(np.int64), minlength=k)
+    g_vis = counts.gt_sizes[np.searchsorted(counts.gt_keys, counts.pair_gt[kept])] >= VISIBLE_POINTS
+    found_vis = np.bincount(matched_class[g_vis], minlength=k)
     n_pred = np.bincount((counts.pred_keys % kk).astype(np.int64), minlength=k)
     conf = counts.confusion
     tp = np.diag(conf)
@@ -318,7 +331,8 @@ def score_counts(counts: LabelCounts, *, iou_threshold: float = 0.5) -> Evaluati
             class_id=c, name=CLASS_NAMES[c] if c < len(CLASS_NAMES) else str(c), n_gt=int(n_gt[c]),
             n_found=int(found[c]), accuracy_pct=_pct(int(found[c]), int(n_gt[c])), n_pred=int(n_pred[c]),
             n_pred_matched=int(found[c]), precision_pct=_pct(int(found[c]), int(n_pred[c])),
-            gt_points=int(gt_pts[c]), pred_points=int(pred_pts[c]), iou_pct=_pct(int(tp[c]), int(union[c]))))
+            gt_points=int(gt_pts[c]), pred_points=int(pred_pts[c]), iou_pct=_pct(int(tp[c]), int(union[c])),
+            n_gt_visible=int(n_gt_vis[c]), n_found_visible=int(found_vis[c])))
     present = [r.iou_pct for r in rows if r.gt_points > 0 and r.iou_pct is not None]
     mean = float(np.mean(present)) if present else None
     return Evaluation(classes=tuple(rows), mean_iou_pct=mean, iou_threshold=float(iou_threshold),
@@ -393,7 +407,7 @@ def _instances(cls: npt.NDArray[np.int64], inst: npt.NDArray[np.int64],
 def loss_buckets(
     gt_class: npt.ArrayLike, gt_instance: npt.ArrayLike, pred_class: npt.ArrayLike,
     pred_instance: npt.ArrayLike, coarse: npt.ArrayLike, leaf: npt.ArrayLike, *,
-    classes: tuple[int, ...], tiny: int = 100, iou_threshold: float = 0.5,
+    classes: tuple[int, ...], tiny: int = VISIBLE_POINTS, iou_threshold: float = 0.5,
 ) -> list[dict[str, Any]]:
     """Where each ground-truth element of ``classes`` was lost, if it was.
 

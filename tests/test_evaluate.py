@@ -18,6 +18,8 @@ import pytest
 
 from hollowtree.pipeline.tree_stage import TREE_ALGORITHM
 from hollowtree.scenes.metrics import (
+    VISIBLE_POINTS,
+    ClassScore,
     Evaluation,
     LabelCounts,
     count_labels,
@@ -86,6 +88,20 @@ def test_precision_counts_a_false_instance():
     assert m.iou_pct == pytest.approx(100 * 6 / 8)
     g = ev.score("ground")
     assert (g.n_found, g.n_pred, g.iou_pct) == (1, 1, 50.0)  # 2 of its 4 points: IoU 0.5 counts
+
+
+def test_elements_the_scan_hardly_shows_are_counted_apart():
+    v = VISIBLE_POINTS
+    # pillars of v, v - 1 and v + 6 points; the first two found, the third cut in thirds
+    gc = np.full(3 * v + 5, PILLAR)
+    gi = np.repeat([1, 2, 3], [v, v - 1, v + 6])
+    third = (v + 6) // 3
+    pi = np.repeat([1, 2, 3, 4, 5], [v, v - 1, third, third, v + 6 - 2 * third])
+    p = evaluate_labels(gc, gi, gc, pi).score("pillar")
+    assert (p.n_gt, p.n_found, p.n_gt_visible, p.n_found_visible) == (3, 2, 2, 1)
+    # scores saved before the visible elements were counted read back with None
+    old = {k: x for k, x in p.to_dict().items() if not k.endswith("_visible")}
+    assert ClassScore.from_dict(old).n_gt_visible is None
 
 
 def test_na_when_there_is_no_ground_truth():
