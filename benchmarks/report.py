@@ -38,7 +38,7 @@ RESULTS = REPO / "benchmarks" / "results"
 #: These are the figures of docs/generalize.md; edit the file names when a newer run replaces one.
 LATEST = {
     "test": "generalize-test-gen-v3.json",
-    "test-5m": "generalize-test-5m-tree-v39.json",
+    "test-5m": "generalize-test-5m-gen-v3.json",
     "val-4m": "generalize-val-4m-tree-v39.json",
     "val-1m": "generalize-val-density-1m-tree-v39.json",
     "val-10m": "generalize-val-density-10m-tree-v39.json",
