@@ -35,7 +35,7 @@ import numpy as np  # noqa: E402
 
 from hollowtree.classes import ELEMENT_CLASSES, ClassId  # noqa: E402
 from hollowtree.pipeline.labels import LEAF_BITS  # noqa: E402
-from hollowtree.scenes.metrics import LOSS_BUCKETS, false_positives, loss_buckets  # noqa: E402
+from hollowtree.scenes.metrics import LOSS_BUCKETS, VISIBLE_POINTS, false_positives, loss_buckets  # noqa: E402
 from hollowtree.tiling.readers import PointBlock, read_blocks  # noqa: E402
 from hollowtree.tiling.store import RunStore  # noqa: E402
 
@@ -241,7 +241,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="compare --json outputs of this script on the same sites at different densities "
                          "(sparsest first): recall over all elements and over those of at least --tiny "
                          "points in every scan")
-    ap.add_argument("--tiny", type=int, default=100, help="elements under this many points are 'tiny'")
+    ap.add_argument("--tiny", type=int, default=VISIBLE_POINTS,
+                    help="elements under this many points are 'tiny' (default scenes.metrics.VISIBLE_POINTS)")
     ap.add_argument("--posts", action="store_true",
                     help="for each pillar not cut out: its group's root and first split, and the best "
                          "post tree.posts.posts finds on the whole group")
