@@ -21,7 +21,7 @@ element styles
     minarets of 1-8 stages, round or polygonal; pillars round, square or clustered.
 proportions, counts, clutter
     every size and count is drawn from a wide range; clutter (trees, people, cars,
-    benches, bicycles, scaffolding) is scattered around; stations are random, inside and
+    benches, bicycles, scaffolding) is scattered around, never inside anything; stations are random, inside and
     outside, sometimes all on one side (a partial scan); the whole site is turned by a
     random heading.
 
@@ -75,8 +75,57 @@ __all__ = ["FAMILIES", "GENERATOR", "SPLITS", "ScanDraw", "family_of", "procedur
 #: The generator's version, in the names of the scans made from it (a changed distribution
 #: makes new scans, never reuses old ones): ``gen-v2`` draws a site heading; ``gen-v3``
 #: stands every raised column on something (a pavilion's platform square to its columns,
-#: a facade's roof pavilions on a platform on the wall top, a monument's on its roof).
-GENERATOR = "gen-v3"
+#: a facade's roof pavilions on a platform on the wall top, a monument's on its roof);
+#: ``gen-v4`` stands nothing inside anything else (a garden's pavilions, colonnades and
+#: pillars apart, clutter and stations clear of what stands on the ground).
+GENERATOR = "gen-v4"
+
+#: What stands on the ground is kept apart on a raster of :data:`FOOT_CELL` metres: the
+#: cells of a thing's surface below :data:`FOOT_HEIGHT` metres (a column, a wall, a
+#: platform; not a slab or a dome overhead) are taken, and clutter or a station goes only
+#: where its own cells and :data:`FOOT_CLEAR` cells around them are free.
+FOOT_CELL = 0.25
+FOOT_HEIGHT = 2.0
+FOOT_CLEAR = 1
+#: Metres kept between a garden's pavilions, colonnades and free-standing pillars.
+GARDEN_CLEAR = 0.8
+#: Draws of a position before a thing that finds no free one is left out.
+PLACE_TRIES = 30
+
+
+def _footprint(m: TriMesh, below: float = FOOT_HEIGHT) -> np.ndarray:
+    """The :data:`FOOT_CELL` cells (keys, unique) of ``m``'s surface below ``below`` metres:
+    every face reaching below it sampled at about 16 points per cell area (its corners
+    among them), with a fixed random source (a site stays a function of its seed).
+
+    >>> from hollowtree.scenes.shapes import box
+    >>> len(_footprint(box((0.1, 0.1, 0.0), (0.9, 0.4, 3.0))))  # 4 x 2 cells
+    8
+    >>> len(_footprint(box((0.0, 0.0, 2.5), (1.0, 1.0, 3.0))))  # all of it overhead
+    0
+    """
+    t = m.vertices[m.faces]
+    t = t[t[:, :, 2].min(axis=1) < below]
+    if not len(t):
+        return np.zeros(0, dtype=np.int64)
+    area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+    n = np.minimum(np.ceil(16.0 * area / FOOT_CELL**2), 200_000).astype(np.int64)
+    face = np.repeat(np.arange(len(t)), n)
+    ab = np.random.default_rng(0).random((len(face), 2))
+    flip = ab.sum(axis=1) > 1.0
+    ab[flip] = 1.0 - ab[flip]
+    p = t[face, 0] + ab[:, :1] * (t[face, 1] - t[face, 0]) + ab[:, 1:] * (t[face, 2] - t[face, 0])
+    p = np.vstack([p, t.reshape(-1, 3)])
+    p = p[p[:, 2] < below]
+    ij = np.floor(p[:, :2] / FOOT_CELL).astype(np.int64)
+    return np.unique(ij[:, 0] * (1 << 32) + ij[:, 1])
+
+
+def _grown(keys: np.ndarray, cells: int = FOOT_CLEAR) -> np.ndarray:
+    """``keys`` (of :func:`_footprint`) and the cells within ``cells`` of them."""
+    d = np.arange(-cells, cells + 1)
+    return np.unique(keys[:, None] + (d[:, None] * (1 << 32) + d[None, :]).reshape(1, -1))
+
 
 #: The layout families, in the order :func:`family_of` cycles through them.
 FAMILIES = ("courtyard_mosque", "linear_facade", "fort", "pavilion_garden", "curved_facade", "monument", "ruins")
@@ -113,15 +162,39 @@ class _Site:
     """A SceneBuilder with the random source and the ruin rule of one site."""
 
     def __init__(self, name: str, rng: np.random.Generator, *, ruin: float = 0.0,
-                 ruin_rng: np.random.Generator | None = None) -> None:
+                 ruin_rng: np.random.Generator | None = None, place_rng: np.random.Generator | None = None) -> None:
         self.b = SceneBuilder(name)
         self.rng = rng
         self.ruin = ruin
         # the ruin's own draws: the same seed makes the same layout, ruined or not
         self.ruin_rng = ruin_rng if ruin_rng is not None else np.random.default_rng(0)
+        # a blocked position's redraws: the site's own draws stay those of ``gen-v3``
+        self.place_rng = place_rng if place_rng is not None else np.random.default_rng(1)
         self.extent = np.array([[np.inf, np.inf], [-np.inf, -np.inf]])
         self.solid: list[tuple[float, float, float, float]] = []  # footprints no station stands in
         self.fallen = False  # in a ruin: what is built now stood on something that fell
+        self.taken: set[int] = set()  # the raster cells (:func:`_footprint`) of what stands on the ground
+        self.apart: list[tuple[float, float, float, float, float]] = []  # a garden's (x0, y0, x1, y1, r)
+
+    def free(self, keys: np.ndarray) -> bool:
+        """Whether the cells ``keys`` and :data:`FOOT_CLEAR` around them are all free."""
+        return not any(int(k) in self.taken for k in _grown(keys))
+
+    def spot(self, x: float, y: float, box: tuple[float, float, float, float], radius: float,
+             along: tuple[float, float] = (0.0, 0.0)) -> tuple[float, float] | None:
+        """``(x, y)``, or a position redrawn in ``box`` (x0, x1, y0, y1) from the placement's
+        own draws (up to :data:`PLACE_TRIES`), for a thing reaching ``radius`` metres around
+        the segment from it to it + ``along``: :data:`GARDEN_CLEAR` apart from every thing
+        placed so far (then it is kept); None where none is free."""
+        for k in range(PLACE_TRIES):
+            if k:
+                x, y = (float(self.place_rng.uniform(box[0], box[1])), float(self.place_rng.uniform(box[2], box[3])))
+            seg = np.linspace((x, y), (x + along[0], y + along[1]), 16)
+            if all(np.hypot(*(seg[:, None, :] - np.linspace((a, b), (c, d), 16)[None, :, :]).T).min()
+                   >= radius + r + GARDEN_CLEAR for a, b, c, d, r in self.apart):
+                self.apart.append((x, y, x + along[0], y + along[1], radius))
+                return x, y
+        return None
 
     def u(self, lo: float, hi: float) -> float:
         return float(self.rng.uniform(lo, hi))
@@ -147,9 +220,11 @@ class _Site:
     def add(self, mesh: TriMesh | list[TriMesh], cls: ClassId, name: str) -> bool:
         """Add one instance; in a ruin it may be missing or broken off at a random height.
         True when it stands whole (what stands on it can stand)."""
+        m = mesh if isinstance(mesh, TriMesh) else concat_meshes(mesh)
+        if cls != ClassId.GROUND:  # fallen or not: the layout is the same, ruined or not
+            self.taken.update(_footprint(m).tolist())
         if self.fallen:
             return False
-        m = mesh if isinstance(mesh, TriMesh) else concat_meshes(mesh)
         whole = True
         if self.ruin and cls != ClassId.GROUND:
             if self.ruin_rng.random() < 0.5 * self.ruin:
@@ -306,23 +381,34 @@ def _arcade_storeys(s: _Site, path: StraightPath | ArcPath, name: str, *, storey
 
 
 def _clutter(s: _Site, x0: float, x1: float, y0: float, y1: float, n: int) -> None:
-    for k in range(n):
+    """``n`` things (trees, people, cars, ...) drawn in the box, each where it stands clear
+    of everything on the ground so far (:meth:`_Site.free`): a blocked one is moved (the
+    placement's own draws, :data:`PLACE_TRIES` at most) or left out."""
+    placed = 0
+    for _ in range(n):
         x, y, yaw = s.u(x0, x1), s.u(y0, y1), s.u(0, 2 * np.pi)
         kind = s.pick(("tree", "tree", "person", "person", "car", "bench", "bicycle", "scaffold"))
-        if kind == "tree":
-            m = tree(x=x, y=y, height=s.u(3.0, 12.0), crown_radius=s.u(1.0, 4.0))
-        elif kind == "person":
-            m = person(x=x, y=y, height=s.u(1.5, 1.9))
-        elif kind == "car":
-            m = car(x=x, y=y, yaw=yaw)
-        elif kind == "bench":
-            m = bench(x=x, y=y, yaw=yaw)
-        elif kind == "bicycle":
-            m = bicycle(x=x, y=y, yaw=yaw)
-        else:
-            w, d, h = s.u(2.0, 6.0), s.u(1.0, 2.0), s.u(3.0, 10.0)
-            m = scaffold(x=x, y=y, yaw=yaw, width=w, depth=d, height=h)
-        s.add(m, ClassId.OTHER, f"{kind} {k + 1}")
+        size = (s.u(3.0, 12.0), s.u(1.0, 4.0)) if kind == "tree" else (s.u(1.5, 1.9),) if kind == "person" \
+            else (s.u(2.0, 6.0), s.u(1.0, 2.0), s.u(3.0, 10.0)) if kind == "scaffold" else ()
+        for k in range(PLACE_TRIES):
+            if k:
+                x, y = float(s.place_rng.uniform(x0, x1)), float(s.place_rng.uniform(y0, y1))
+            if kind == "tree":
+                m = tree(x=x, y=y, height=size[0], crown_radius=size[1])
+            elif kind == "person":
+                m = person(x=x, y=y, height=size[0])
+            elif kind == "car":
+                m = car(x=x, y=y, yaw=yaw)
+            elif kind == "bench":
+                m = bench(x=x, y=y, yaw=yaw)
+            elif kind == "bicycle":
+                m = bicycle(x=x, y=y, yaw=yaw)
+            else:
+                m = scaffold(x=x, y=y, yaw=yaw, width=size[0], depth=size[1], height=size[2])
+            if s.free(_footprint(m)):
+                placed += 1
+                s.add(m, ClassId.OTHER, f"{kind} {placed}")
+                break
 
 
 # --------------------------------------------------------------------------- layouts
@@ -437,29 +523,50 @@ def _fort(s: _Site) -> None:
 
 
 def _pavilion_garden(s: _Site) -> None:
+    """Pavilions, colonnades and free-standing pillars, each :data:`GARDEN_CLEAR` apart from
+    the others and inside the enclosure's square (:meth:`_Site.spot`)."""
     size = s.u(30.0, 90.0)
-    for k in range(s.i(1, 6)):
-        _pavilion(s, s.u(-size / 2 + 5, size / 2 - 5), s.u(-size / 2 + 5, size / 2 - 5), f"pavilion {k + 1}")
-    for k in range(s.i(0, 2)):  # a colonnade: a row of pillars under a beam
+    h = size / 2 + 3
+    walls = ((-h, -h, h, -h), (h, -h, h, h), (h, h, -h, h), (-h, h, -h, -h))
+    s.apart.extend((a, b, c, d, 0.25) for a, b, c, d in walls)
+    done = 0
+    inner = (-size / 2 + 5, size / 2 - 5, -size / 2 + 5, size / 2 - 5)
+    for _ in range(s.i(1, 6)):
+        x, y, half = s.u(*inner[:2]), s.u(*inner[2:]), s.u(1.2, 3.5)
+        at = s.spot(x, y, inner, (half + 0.6) * np.sqrt(2.0))
+        if at is not None:
+            done += 1
+            _pavilion(s, *at, f"pavilion {done}", size=half)
+    done = 0
+    for _ in range(s.i(0, 2)):  # a colonnade: a row of pillars under a beam
         n = s.i(3, 10)
         pitch = s.u(2.0, 4.0)
         x0, y0, yaw = s.u(-size / 3, size / 3), s.u(-size / 3, size / 3), s.u(0, np.pi)
-        h = s.u(2.5, 6.0)
+        h_col = s.u(2.5, 6.0)
         style = str(s.pick(("round", "square", "clustered")))
         r = s.u(0.15, 0.4)
+        ex, ey = (n - 1) * pitch * np.cos(yaw), (n - 1) * pitch * np.sin(yaw)
+        at = s.spot(x0, y0, (-size / 3, size / 3, -size / 3, size / 3), 2.3 * r + 0.6, along=(ex, ey))
+        if at is None:
+            continue
+        done += 1
+        x0, y0 = at
         for i in range(n):
-            _pillar(s, x0 + i * pitch * np.cos(yaw), y0 + i * pitch * np.sin(yaw), h, f"colonnade {k + 1} pillar {i + 1}",
-                    style=style, radius=r)
+            _pillar(s, x0 + i * pitch * np.cos(yaw), y0 + i * pitch * np.sin(yaw), h_col,
+                    f"colonnade {done} pillar {i + 1}", style=style, radius=r)
         if s.rng.random() < 0.6:
-            ex, ey = (n - 1) * pitch * np.cos(yaw), (n - 1) * pitch * np.sin(yaw)
             s.add(wall(StraightPath(x0=x0 - 0.5 * np.cos(yaw), y0=y0 - 0.5 * np.sin(yaw), x1=x0 + ex + 0.5 * np.cos(yaw),
-                                    y1=y0 + ey + 0.5 * np.sin(yaw)), height=s.u(0.4, 0.9), thickness=3.0 * r + 0.2, z0=h),
-                  ClassId.WALL, f"colonnade {k + 1} beam")
-    for k in range(s.i(0, 8)):  # free-standing pillars
-        _pillar(s, s.u(-size / 2, size / 2), s.u(-size / 2, size / 2), s.u(2.0, 8.0), f"pillar {k + 1}")
+                                    y1=y0 + ey + 0.5 * np.sin(yaw)), height=s.u(0.4, 0.9), thickness=3.0 * r + 0.2,
+                       z0=h_col), ClassId.WALL, f"colonnade {done} beam")
+    done = 0
+    for _ in range(s.i(0, 8)):  # free-standing pillars (at most 0.55 m in radius, 2.3 x that clustered)
+        x, y, height = s.u(-size / 2, size / 2), s.u(-size / 2, size / 2), s.u(2.0, 8.0)
+        at = s.spot(x, y, (-size / 2, size / 2, -size / 2, size / 2), 1.3)
+        if at is not None:
+            done += 1
+            _pillar(s, *at, height, f"pillar {done}")
     if s.rng.random() < 0.5:  # a low enclosure wall
-        h = size / 2 + 3
-        for k, (a, b, c, d) in enumerate(((-h, -h, h, -h), (h, -h, h, h), (h, h, -h, h), (-h, h, -h, -h))):
+        for k, (a, b, c, d) in enumerate(walls):
             s.add(wall(StraightPath(x0=a, y0=b, x1=c, y1=d), height=s.u(1.0, 3.0), thickness=0.5), ClassId.WALL,
                   f"garden wall {k + 1}")
 
@@ -542,7 +649,8 @@ def procedural_site(seed: int, family: str | None = None, *, ruin: float | None 
     if heading is None:
         heading = float(np.random.default_rng(np.random.SeedSequence([int(seed), FAMILIES.index(family), 2]))
                         .uniform(0.0, 2 * np.pi))
-    s = _Site(f"gen-{family}-{seed}", rng, ruin_rng=ruin_rng)
+    s = _Site(f"gen-{family}-{seed}", rng, ruin_rng=ruin_rng,
+              place_rng=np.random.default_rng(np.random.SeedSequence([int(seed), FAMILIES.index(family), 3])))
     if family == "ruins":
         drawn = float(ruin_rng.uniform(0.2, 0.5))
         s.ruin = drawn if ruin is None else float(ruin)
@@ -567,6 +675,12 @@ def procedural_site(seed: int, family: str | None = None, *, ruin: float | None 
                 x, y = s.u(x0 - 0.7 * m, x1 + 0.7 * m), s.u(y0 - 0.7 * m, y1 + 0.7 * m)
             if not any(a <= x <= b and c <= y <= d for a, b, c, d in s.solid):
                 break
+        for _try in range(50):  # nor in a wall, a column or a tree's trunk (the placement's own draws)
+            if int(np.floor(x / FOOT_CELL)) * (1 << 32) + int(np.floor(y / FOOT_CELL)) not in s.taken \
+                    and not any(a <= x <= b and c <= y <= d for a, b, c, d in s.solid):
+                break
+            x, y = (float(s.place_rng.uniform(x0 - 0.7 * m, x1 + 0.7 * m)),
+                    float(s.place_rng.uniform(y0 - m + 1.0, y0 - 1.0) if one_side else s.place_rng.uniform(y0 - 0.7 * m, y1 + 0.7 * m)))
         s.b.add_station((x, y, EYE))
     return _turned(s.b.build(), heading)
 

@@ -3,6 +3,7 @@ site, compound elements are split into their parts, the splits never overlap."""
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 
@@ -12,9 +13,12 @@ import pytest
 
 from hollowtree.classes import ClassId
 from hollowtree.errors import ConfigError
+from hollowtree.scenes.mesh import TriMesh
 from hollowtree.scenes.procedural import (
     FAMILIES,
+    FOOT_HEIGHT,
     SPLITS,
+    _footprint,
     family_of,
     procedural_site,
     scan_draw,
@@ -165,3 +169,28 @@ def test_every_raised_column_stands_on_something(family):
         assert _unsupported_columns(site) == [], site.name
         raised += sum(e.class_id == ClassId.PILLAR for e in site.elements)
     assert family == "curved_facade" or raised > 0
+
+
+def _cells(site, name: str, below: float = FOOT_HEIGHT) -> set[int]:
+    inst = next(e.instance for e in site.elements if e.name == name)
+    return set(_footprint(TriMesh(site.vertices, site.faces[site.face_instance == inst]), below).tolist())
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_nothing_stands_inside_anything_else(family):
+    """``gen-v4``: no clutter shares a raster cell of what stands on the ground (below 2 m)
+    with anything else; a garden's pavilions, colonnades and pillars share none at any height."""
+    clutter = re.compile(r"(tree|person|car|bench|bicycle|scaffold) \d+")
+    for seed in split_seeds("train", 3, family=family):
+        site = procedural_site(seed, family, heading=0.0)
+        names = [e.name for e in site.elements if e.class_id != ClassId.GROUND]
+        low = {n: _cells(site, n) for n in names}
+        for a in filter(clutter.fullmatch, names):
+            assert not any(low[a] & low[b] for b in names if b != a), (site.name, a)
+        groups: dict[str, set[int]] = {}
+        for n in names:
+            m = re.match(r"(pavilion|colonnade|pillar) \d+", n)
+            if m and family == "pavilion_garden":
+                groups.setdefault(m.group(0), set()).update(_cells(site, n, below=np.inf))
+        g = list(groups.values())
+        assert all(not (g[i] & g[j]) for i in range(len(g)) for j in range(i + 1, len(g))), site.name
