@@ -40,15 +40,15 @@ LATEST = {
     "test": "generalize-test-gen-v4.json",
     "test-5m": "generalize-test-5m-gen-v3.json",
     "val-4m": "generalize-val-4m-tree-v39.json",
-    "val-1m": "generalize-val-density-1m-tree-v39.json",
-    "val-10m": "generalize-val-density-10m-tree-v39.json",
-    "val-3m": "generalize-val-density-3m-tree-v39.json",
+    "val-1m": "generalize-val-density-1m-gen-v4.json",
+    "val-10m": "generalize-val-density-10m-gen-v4.json",
+    "val-3m": "generalize-val-density-3m-gen-v4.json",
     # the second validation batch (seeds 100 014-100 027) at the hidden scenes' density
     "val-5m-b": "generalize-val-5m-b-tree-v39.json",
     # the dome batch: the next 6 validation seeds of each family with domes (100 028-100 068)
     "val-domes": "generalize-val-domes-gen-v4.json",
     # diagnose_generalize.py --density over the 1 M, 3 M and 10 M rows (tree seed 0)
-    "density": "generalize-val-density-visible-tree-v39.json",
+    "density": "generalize-val-density-visible-gen-v4.json",
     "val": "generalize-val-gen-v4.json",
     # the latest run with the paper's energy path (other runs pass --no-energy; it runs with
     # tree.verify=false, so tree-v25 and tree-v26 did not change it)

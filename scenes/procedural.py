@@ -21,9 +21,9 @@ element styles
     minarets of 1-8 stages, round or polygonal; pillars round, square or clustered.
 proportions, counts, clutter
     every size and count is drawn from a wide range; clutter (trees, people, cars,
-    benches, bicycles, scaffolding) is scattered around, never inside anything; stations are random, inside and
-    outside, sometimes all on one side (a partial scan); the whole site is turned by a
-    random heading.
+    benches, bicycles, scaffolding) is scattered around, never inside anything; stations
+    are random, inside and outside, sometimes all on one side (a partial scan); the whole
+    site is turned by a random heading.
 
 A site is a pure function of ``(seed, family)``. :data:`SPLITS` fixes which seeds are for
 training, validation and test (docs/generalize.md): learned parts and thresholds are
