@@ -50,6 +50,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from hollowtree.classes import ClassId
 from hollowtree.errors import ConfigError
@@ -117,8 +118,13 @@ def _footprint(m: TriMesh, below: float = FOOT_HEIGHT) -> np.ndarray:
     p = t[face, 0] + ab[:, :1] * (t[face, 1] - t[face, 0]) + ab[:, 1:] * (t[face, 2] - t[face, 0])
     p = np.vstack([p, t.reshape(-1, 3)])
     p = p[p[:, 2] < below]
-    ij = np.floor(p[:, :2] / FOOT_CELL).astype(np.int64)
-    return np.unique(ij[:, 0] * (1 << 32) + ij[:, 1])
+    return np.unique(_cell(p[:, 0], p[:, 1]))
+
+
+def _cell(x: npt.ArrayLike, y: npt.ArrayLike) -> np.ndarray:
+    """The key of the :data:`FOOT_CELL` cell holding each point ``(x, y)``."""
+    i = np.floor(np.asarray(x, dtype=np.float64) / FOOT_CELL).astype(np.int64)
+    return i * (1 << 32) + np.floor(np.asarray(y, dtype=np.float64) / FOOT_CELL).astype(np.int64)
 
 
 def _grown(keys: np.ndarray, cells: int = FOOT_CLEAR) -> np.ndarray:
@@ -217,12 +223,13 @@ class _Site:
         finally:
             self.fallen = before
 
-    def add(self, mesh: TriMesh | list[TriMesh], cls: ClassId, name: str) -> bool:
+    def add(self, mesh: TriMesh | list[TriMesh], cls: ClassId, name: str, *, cells: np.ndarray | None = None) -> bool:
         """Add one instance; in a ruin it may be missing or broken off at a random height.
-        True when it stands whole (what stands on it can stand)."""
+        True when it stands whole (what stands on it can stand). ``cells``: its
+        :func:`_footprint` where the caller has it already."""
         m = mesh if isinstance(mesh, TriMesh) else concat_meshes(mesh)
         if cls != ClassId.GROUND:  # fallen or not: the layout is the same, ruined or not
-            self.taken.update(_footprint(m).tolist())
+            self.taken.update((_footprint(m) if cells is None else cells).tolist())
         if self.fallen:
             return False
         whole = True
@@ -405,9 +412,10 @@ def _clutter(s: _Site, x0: float, x1: float, y0: float, y1: float, n: int) -> No
                 m = bicycle(x=x, y=y, yaw=yaw)
             else:
                 m = scaffold(x=x, y=y, yaw=yaw, width=size[0], depth=size[1], height=size[2])
-            if s.free(_footprint(m)):
+            cells = _footprint(m)
+            if s.free(cells):
                 placed += 1
-                s.add(m, ClassId.OTHER, f"{kind} {placed}")
+                s.add(m, ClassId.OTHER, f"{kind} {placed}", cells=cells)
                 break
 
 
@@ -667,20 +675,23 @@ def procedural_site(seed: int, family: str | None = None, *, ruin: float | None 
     s.b.add(ground(x0 - m, x1 + m, y0 - m, y1 + m), ClassId.GROUND, "ground")
     n = s.i(3, 10)
     one_side = s.rng.random() < 0.25
+    if one_side:  # a partial scan: every station south of the site
+        box = (x0 - 0.5 * m, x1 + 0.5 * m, y0 - m + 1.0, y0 - 1.0)
+    else:
+        box = (x0 - 0.7 * m, x1 + 0.7 * m, y0 - 0.7 * m, y1 + 0.7 * m)
+
+    def solid(x: float, y: float) -> bool:
+        return any(a <= x <= b and c <= y <= d for a, b, c, d in s.solid)
+
     for _ in range(n):
         for _try in range(50):  # not inside a hall or a tomb
-            if one_side:  # a partial scan: every station south of the site
-                x, y = s.u(x0 - 0.5 * m, x1 + 0.5 * m), s.u(y0 - m + 1.0, y0 - 1.0)
-            else:
-                x, y = s.u(x0 - 0.7 * m, x1 + 0.7 * m), s.u(y0 - 0.7 * m, y1 + 0.7 * m)
-            if not any(a <= x <= b and c <= y <= d for a, b, c, d in s.solid):
+            x, y = float(s.rng.uniform(*box[:2])), float(s.rng.uniform(*box[2:]))
+            if not solid(x, y):
                 break
         for _try in range(50):  # nor in a wall, a column or a tree's trunk (the placement's own draws)
-            if int(np.floor(x / FOOT_CELL)) * (1 << 32) + int(np.floor(y / FOOT_CELL)) not in s.taken \
-                    and not any(a <= x <= b and c <= y <= d for a, b, c, d in s.solid):
+            if int(_cell(x, y)) not in s.taken and not solid(x, y):
                 break
-            x, y = (float(s.place_rng.uniform(x0 - 0.7 * m, x1 + 0.7 * m)),
-                    float(s.place_rng.uniform(y0 - m + 1.0, y0 - 1.0) if one_side else s.place_rng.uniform(y0 - 0.7 * m, y1 + 0.7 * m)))
+            x, y = float(s.place_rng.uniform(*box[:2])), float(s.place_rng.uniform(*box[2:]))
         s.b.add_station((x, y, EYE))
     return _turned(s.b.build(), heading)
 
