@@ -37,42 +37,38 @@ RESULTS = REPO / "benchmarks" / "results"
 #: The latest run of each kind of element-recall result (``bench_generalize.py --json``).
 #: These are the figures of docs/generalize.md; edit the file names when a newer run replaces one.
 LATEST = {
-    "test": "generalize-test-gen-v4.json",
+    "test": "generalize-test-tree-v40.json",
     "test-5m": "generalize-test-5m-gen-v3.json",
-    "val-4m": "generalize-val-4m-tree-v39.json",
-    "val-1m": "generalize-val-density-1m-gen-v4.json",
-    "val-10m": "generalize-val-density-10m-gen-v4.json",
-    "val-3m": "generalize-val-density-3m-gen-v4.json",
+    "val-4m": "generalize-val-4m-tree-v40.json",
+    "val-1m": "generalize-val-density-1m-tree-v40.json",
+    "val-10m": "generalize-val-density-10m-tree-v40.json",
+    "val-3m": "generalize-val-density-3m-tree-v40.json",
     # the second validation batch (seeds 100 014-100 027) at the hidden scenes' density
     "val-5m-b": "generalize-val-5m-b-tree-v39.json",
     # the dome batch: the next 6 validation seeds of each family with domes (100 028-100 068)
-    "val-domes": "generalize-val-domes-gen-v4.json",
+    "val-domes": "generalize-val-domes-tree-v40.json",
     # diagnose_generalize.py --density over the 1 M, 3 M and 10 M rows (tree seed 0)
-    "density": "generalize-val-density-visible-gen-v4.json",
-    "val": "generalize-val-gen-v4.json",
+    "density": "generalize-val-density-visible-tree-v40.json",
+    "val": "generalize-val-tree-v40.json",
     # the latest run with the paper's energy path (other runs pass --no-energy; it runs with
     # tree.verify=false, so tree-v25 and tree-v26 did not change it)
-    "test-energy": "generalize-test-gen-v4.json",
+    "test-energy": "generalize-test-tree-v40.json",
     # docs/results.md: the paper's five sites, a report set (hollowtree evaluate --seeds 3)
     "five-sites": "five-sites-10m-tree-v39.json",
 }
 
-#: What each validation variant of docs/decisions/method.md was (``generalize-val-4m*.json``;
-#: its 0.5-2 M twin, where there is one, is the same name without ``-4m``).
-VAL_VARIANTS = {
-    "generalize-val-4m-tall-off.json": "`tree-v35`, the tall-pillar rules off",
-    "generalize-val-4m-tree-v36-final.json": "`tree-v36` without the second draw",
-}
 #: Variants judged on tree seeds 0, 1 and 2 (the selection rule from ``tree-v36``,
 #: docs/generalize.md): the name part of their JSONs (``generalize-val-4m-<name>.json`` is
 #: seed 0, ``...-<name>-seed1.json`` seed 1, ...), in the order they were run.
 VAL_SEEDS = {
     "group300k": "`tree.max_group_points` 1 M -> 300 k",
-    "coarse-cut": "rejected: S2 and S3 also offer the cut at their most prominent peak",
+    "coarse-cut": "rejected: S2 and S3 also cut at their most prominent peak",
     "shape-check": "`tree-v37`: the element check with its points' shape",
-    "class-thr": "not adopted: the check's thresholds for domes 0.5 and minarets 0.3, chosen on these sites",
+    "class-thr": "not adopted: the check's dome 0.5 and minaret 0.3, chosen on these sites",
     "oof-thr": "rejected: the thresholds chosen on training seeds",
-    "oof-dm": "`tree-v39`: the dome and minaret thresholds chosen on training seeds (the default)",
+    "oof-dm": "`tree-v39`: the dome and minaret thresholds chosen on training seeds",
+    "gen-v4": "`tree-v39`, `gen-v4` sites",
+    "tree-v40": "`tree-v40`: the look-ahead from any node (default; `gen-v4`)",
 }
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
 BEGIN = re.compile(r"<!-- generated: ([\w.-]+) -->\n")
@@ -444,31 +440,6 @@ def _f1(d: dict) -> float:
     return 2 * r * pr / (r + pr)
 
 
-def val_history() -> str:
-    """Every validation variant at 4 M points (14 sites), the F1 summed with its 0.5-2 M
-    twin where it has one, and with its 10 M twin too (``val-density-10m``, the selection
-    rule from ``tree-v35``): what was tried on the way to the tree (:data:`VAL_VARIANTS`)."""
-    out = ["| variant | arch | dome | minaret | pillar | found | precision | F1 | F1 sum | + 10 M |",
-           "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
-    for name, what in VAL_VARIANTS.items():
-        d = _load(name)
-        t = d["totals"]["tree"]
-        fd, gt, m, p = _found(t)
-        twin = RESULTS / name.replace("val-4m", "val")
-        dense = RESULTS / name.replace("val-4m", "val-density-10m")
-        total, three = "NA", "NA"
-        if twin.is_file() and "val-4m" in name:
-            f1 = _f1(d) + _f1(json.loads(twin.read_text()))
-            total = f"{f1:.3f}"
-            if dense.is_file():  # the selection rule from tree-v35 (docs/generalize.md)
-                three = f"{f1 + _f1(json.loads(dense.read_text())):.3f}"
-        per = [str(t[c]["found"]) for c in ELEMENTS]
-        over = "".join(f" (`{re.sub(r'=/.*/', '=', o)}`)" for o in d.get("overrides", []))
-        out.append(f"| {what}{over} | " + " | ".join(per)
-                   + f" | {fd} / {gt} | {100 * m / p:.1f} % | {_f1(d):.3f} | {total} | {three} |")
-    return "\n".join(out)
-
-
 def _three_rows(name: str) -> tuple[float, float, float] | None:
     """F1 of one run's three validation rows (0.5-2 M, 4 M, 10 M), or None where one is missing."""
     files = [RESULTS / f"generalize-{row}-{name}.json" for row in ("val", "val-4m", "val-density-10m")]
@@ -619,7 +590,6 @@ GENERATORS: dict[str, Callable[[], str]] = {
     "workflow": workflow,
     "store": store,
     "five-sites": five_sites,
-    "val-history": val_history,
     "val-seeds": val_seeds,
     "workflow-keys": workflow_keys,
 }

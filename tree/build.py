@@ -50,11 +50,6 @@ _WALL = int(ClassId.WALL)
 #: ``propose``'s keys of the storeys and of the cuts into bays (S2, S3).
 _STOREYS = 4
 _BAYS = (2, 3)
-#: The classes of the nodes whose storeys cut is judged by its storeys' bays when no
-#: proposal reaches the threshold (``build_tree(look_ahead=)``): walls, and what HollowNet
-#: calls a minaret, as it calls a tall curved arcade facade seen whole. Chosen on the
-#: validation split (docs/generalize.md).
-LOOK_AHEAD_FROM = (_WALL, int(ClassId.MINARET))
 #: A storey is looked into (``build_tree(look_ahead=)``) when under this share of its wall
 #: projection's cells is occupied (:func:`_solid_share`): it has a row of openings.
 OPEN_STOREY = 0.8
@@ -264,12 +259,13 @@ def build_tree(
         classifier's probability rows must then be HollowNet's (8 classes). The energy's
         terms are still computed and recorded.
     look_ahead : bool
-        When no proposal of a node classed wall or minaret (:data:`LOOK_AHEAD_FROM`),
-        above ``max_depth - 1``, reaches the
-        threshold and one of them is a storeys cut, each storey (cut at the bands' middles,
+        When no proposal of a node above ``max_depth - 1`` reaches the threshold and one of
+        them is a storeys cut, each storey (cut at the bands' middles,
         as the proposal was scored) with a row of openings (under :data:`OPEN_STOREY` of
         its wall projection occupied) gets its cuts into bays (S2, S3) scored; the storeys
-        cut is kept when one of those reaches the threshold.
+        cut is kept when one of those reaches the threshold. Whatever HollowNet calls the
+        node: it sees shape without size, and a curved arcade facade seen whole is called
+        wall, minaret or dome by its scan.
         A storey cut rarely changes a class (a wall over a row of arches leaves a wall and
         a band of bays that HollowNet calls wall); what it is for is the bays below it.
         The node table's ``xi`` stays the cut's own score, so a split child whose ``xi``
@@ -451,8 +447,8 @@ def build_tree(
         x, key, (pr, e, c_cls, c_sc, c_pr) = _best(scored)
         keep = x >= thr_split
         storey = [t for t in scored if t[1] == _STOREYS]
-        if not keep and storey and look_ahead and cls[node] in LOOK_AHEAD_FROM and depth[node] + 1 < max_depth:
-            # A wall's storey cut is judged by what its storeys split into (the bays): the
+        if not keep and storey and look_ahead and depth[node] + 1 < max_depth:
+            # A storey cut is judged by what its storeys split into (the bays): the
             # storeys as the proposal was scored (cut at the bands' middles), their cuts into bays.
             st, _, k_cls, _, k_pr = storey[0][2]
             for j, child in enumerate(st.children):

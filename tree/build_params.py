@@ -22,8 +22,8 @@ class BuildParams(Params, owner="build_tree"):
     max_depth : int
         The paper's ``d``.
     look_ahead : bool
-        A wall's storeys cut that no proposal beats is kept when one of its storeys with a
-        row of openings would be cut into bays.
+        A storeys cut that no proposal beats is kept when one of its storeys with a row of
+        openings would be cut into bays.
     threshold : float or None
         A split is kept when its score (the split model's probability, or ``xi``) reaches
         this; None = the model's own.
