@@ -69,6 +69,7 @@ VAL_SEEDS = {
     "oof-dm": "`tree-v39`: the dome and minaret thresholds chosen on training seeds",
     "gen-v4": "`tree-v39`, `gen-v4` sites",
     "tree-v40": "`tree-v40`: the look-ahead from any node (default; `gen-v4`)",
+    "support-spacing": "rejected: RANSAC's minimum support follows the scan's spacing (`coarse.support_spacing`)",
 }
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
 BEGIN = re.compile(r"<!-- generated: ([\w.-]+) -->\n")

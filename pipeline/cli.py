@@ -140,8 +140,7 @@ def build_parser() -> argparse.ArgumentParser:
                              "segments over their shared buffer points. Rerunning resumes: recorded tiles "
                              "are skipped.")
     c.add_argument("store", help="run store made by `hollowtree ingest`")
-    _stage_flag(c, CoarseSection, "epsilon", "alpha", "cluster_epsilon", "min_support", "support_spacing", "eps",
-                "min_samples")
+    _stage_flag(c, CoarseSection, "epsilon", "alpha", "cluster_epsilon", "min_support", "eps", "min_samples")
     c.add_argument("--no-free-segments", action="store_true",
                    help="leave points that no primitive explains unsegmented (default: DBSCAN them too)")
     _stage_flag(c, CoarseSection, "free_min_points", "free_min_cells", "block_points", "block_margin", "sparse_factor", "group_gap",

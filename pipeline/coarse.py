@@ -371,13 +371,6 @@ class CoarseReport:
 # consecutive (Morton-sorted, so compact) rows drawn over the whole scan.
 EPS_QUANTILE = 0.25
 EPS_FACTOR = 9.0
-#: The quantile of the same spacing that ``coarse.support_spacing`` scales the minimum
-#: support by: the far, elevated surfaces', where the elements are.
-SUPPORT_QUANTILE = 0.75
-#: The scaled minimum support stays within this factor of ``min_support`` either way: a
-#: guard for scans far outside the validated range (an uncapped mm-dense scan would ask
-#: for 100 x); validation scans from 0.5 M to 10 M points span 0.3-4.5 x.
-SUPPORT_RANGE = 8.0
 #: A scan whose spacing (as measured for the eps) is above this many metres gets a warning:
 #: columns and mouldings 0.3-1 m across need points a few cm apart to be cut out.
 MAX_SPACING = 0.5
@@ -449,16 +442,10 @@ def window_distances_task(url: str, k: int, windows: list[tuple[int, int]], size
 
 
 def scan_spacing(store: RunStore, sizes: dict[int, int], *, seed: int = 0, runner: Any = None) -> float | None:
-    """The scan's point spacing for the automatic eps (:func:`scan_spacings` at ``EPS_QUANTILE``)."""
-    return scan_spacings(store, sizes, (EPS_QUANTILE,), seed=seed, runner=runner)[0]
-
-
-def scan_spacings(store: RunStore, sizes: dict[int, int], quantiles: tuple[float, ...], *, seed: int = 0,
-                  runner: Any = None) -> tuple[float | None, ...]:
-    """The scan's point spacings: each of ``quantiles`` of the 8-NN distance over
-    ``SPACING_WINDOWS`` windows of ``WINDOW_ROWS`` consecutive tile rows, whose starts are
-    drawn uniformly over all the scan's kept points (``sizes``: points per tile), so a
-    tile is measured in proportion to its points. Tile rows are
+    """The scan's point spacing for the automatic eps: the ``EPS_QUANTILE`` of the 8-NN
+    distance over ``SPACING_WINDOWS`` windows of ``WINDOW_ROWS`` consecutive tile rows,
+    whose starts are drawn uniformly over all the scan's kept points (``sizes``: points
+    per tile), so a tile is measured in proportion to its points. Tile rows are
     Morton-sorted, so a window is a compact piece of surface and a point's neighbours are
     its true neighbours. Reads only the windows (a few MB), never a whole tile; the
     windows are measured in ``SPACING_UNITS`` tasks of ``runner`` (in this process
@@ -466,9 +453,8 @@ def scan_spacings(store: RunStore, sizes: dict[int, int], quantiles: tuple[float
     None when the scan has no spacing to measure: fewer than 9 points, no window with 9
     points, or nothing but exact duplicates (the caller then falls back to a fixed eps).
     """
-    none = (None,) * len(quantiles)
     if sum(n for n in sizes.values() if n > 0) <= 8:
-        return none
+        return None
     windows = _spacing_windows(sizes, seed)
     n_units = min(SPACING_UNITS, len(windows))
     units = [(store.url, k, windows[k * len(windows) // n_units:(k + 1) * len(windows) // n_units], sizes)
@@ -478,27 +464,9 @@ def scan_spacings(store: RunStore, sizes: dict[int, int], quantiles: tuple[float
     else:
         found = runner(window_distances_task, units, "coarse: spacing")
     try:
-        got = tuple(spacing_quantile(found, k=8, quantile=q) for q in quantiles)
+        return spacing_quantile(found, k=8, quantile=EPS_QUANTILE)
     except ConfigError:  # no distinct neighbours anywhere in the windows
-        return none
-    return got
-
-
-def scaled_support(min_support: int, support_spacing: float | None, spacing: float | None) -> int:
-    """The minimum support a scan of ``spacing`` (its ``SUPPORT_QUANTILE`` 8-NN spacing)
-    uses: ``min_support`` x (``support_spacing`` / ``spacing``)^2 (a least area,
-    ``coarse.support_spacing``), within ``SUPPORT_RANGE`` times ``min_support`` either way
-    and at least 3; ``min_support`` where either is None.
-
-    >>> scaled_support(1000, 0.12, 0.06), scaled_support(1000, 0.12, 0.24), scaled_support(1000, 0.12, 0.005)
-    (4000, 250, 8000)
-    >>> scaled_support(1000, None, 0.06), scaled_support(1000, 0.12, None)
-    (1000, 1000)
-    """
-    if support_spacing is None or spacing is None:
-        return min_support
-    scaled = min_support * (support_spacing / spacing) ** 2
-    return max(3, round(min(max(scaled, min_support / SUPPORT_RANGE), min_support * SUPPORT_RANGE)))
+        return None
 
 
 def _first_round(sizes: list[int], cap: int) -> list[float]:
@@ -557,12 +525,10 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
             "rerun `hollowtree ingest` first"
         )
     eps, cluster_epsilon = params.eps, params.cluster_epsilon
-    spacing = far_spacing = None
-    if eps is None or cluster_epsilon is None or params.support_spacing is not None:
-        sizes = {t: int(done_ingest[str(t)].get("n_points", 0)) for t in tiles}
-        spacing, far_spacing = scan_spacings(store, sizes, (EPS_QUANTILE, SUPPORT_QUANTILE), seed=params.seed,
-                                             runner=runner)
+    spacing = None
     if eps is None or cluster_epsilon is None:
+        sizes = {t: int(done_ingest[str(t)].get("n_points", 0)) for t in tiles}
+        spacing = scan_spacing(store, sizes, seed=params.seed, runner=runner)
         if spacing is not None and spacing > MAX_SPACING:
             logger.warning("%s: the scan's points are %.2f m apart (8-NN spacing, 25 %% quantile): hollowtree is "
                            "made for terrestrial scans of buildings, a few cm apart, and will label a scan this "
@@ -574,10 +540,7 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
             cluster_epsilon = max(0.15, 2.0 * auto_eps / 3.0)
     # Blocks sized by the tiles' points, like eps by the scan's spacing: a derived parameter.
     cap = balanced_block_points([int(done_ingest[str(t)].get("n_points", 0)) for t in tiles], params.block_points)
-    # The minimum support by the scan's spacing, like eps: the value the tiles use, recorded.
-    support = scaled_support(params.min_support, params.support_spacing, far_spacing)
-    params = replace(params, cluster_epsilon=float(cluster_epsilon), eps=float(eps), block_points=cap,
-                     min_support=support)
+    params = replace(params, cluster_epsilon=float(cluster_epsilon), eps=float(eps), block_points=cap)
     cfg = {"params": params.to_dict(), "eps": float(eps), "algorithm": COARSE_ALGORITHM}
     h = params_hash([cfg, attrs["ingest"]["params_hash"]])
     cfg["params_hash"] = h
@@ -665,8 +628,7 @@ def run_coarse(url: str, params: CoarseParams, *, runner: Any) -> CoarseReport:
         n_segments, n_keys = stitch(store, tiles, params, runner=runner, h=h)
     t_stitch = time.perf_counter() - t_stitch
     recs = store.records(STAGE)
-    stage.finish(len(tiles), eps=float(eps), spacing=spacing, far_spacing=far_spacing, params=params.to_dict(),
-                 n_segments=n_segments,
+    stage.finish(len(tiles), eps=float(eps), spacing=spacing, params=params.to_dict(), n_segments=n_segments,
                  n_tile_segments=n_keys)
     return CoarseReport(
         store=url, n_tiles=len(tiles), tiles_run=len(todo), tiles_skipped=len(tiles) - len(todo),

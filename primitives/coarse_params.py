@@ -81,16 +81,6 @@ class CoarseParams(Params, owner="coarse"):
         declared; :attr:`ransac` gives them with the bitmap cell); the stage's default
         minimum support is 1000 points (small primitives cost most of the time and the
         tree splits segments further anyway).
-    support_spacing : float or None
-        Where set, ``min_support`` is a least *area*: it holds as given on a scan whose
-        ``SUPPORT_QUANTILE`` (75 %) 8-NN spacing (:func:`scan_spacing`) is this many
-        metres, and a scan of spacing ``s`` uses ``min_support x (support_spacing / s)^2``
-        (within ``pipeline.coarse.SUPPORT_RANGE``, 8, times ``min_support`` either way): the same wall holds
-        four times the points at half the spacing. The 75 % quantile follows the far,
-        elevated surfaces, where the elements are; the 25 % one (the eps) follows the
-        ground near the stations, which the ingest's cap keeps at a few cm whatever the
-        scan's density. 0.12 m is the median over the training scans (seeds 0-59, 0.5-2 M
-        points), where 1000 points was chosen. None (default) = ``min_support`` points.
     cluster_epsilon : float or None
         RANSAC's bitmap cell; None = max(0.15 m, 2/3 of the automatic eps), computed
         once per store, so sparse far surfaces are not shattered into bitmap islands
@@ -176,10 +166,6 @@ class CoarseParams(Params, owner="coarse"):
     cluster_epsilon: float | None = like(
         RansacParams, "cluster_epsilon", None, doc="RANSAC bitmap cell, metres; null = max(0.15, 2/3 x the automatic eps)")
     min_support: int = like(RansacParams, "min_support", 1000)
-    support_spacing: float | None = param(
-        None, gt=0, doc="min_support holds where the scan's 75 % 8-NN spacing is this many metres; a denser or "
-                        "sparser scan scales it by (this / its spacing)^2 (within 8 x either way), a least area "
-                        "rather than a count; null = min_support as given")
     probability: float = like(RansacParams, "probability")
     shapes: tuple[str, ...] = like(RansacParams, "shapes")
     eps: float | None = param(None, **DBSCAN_ARGS["eps"].rule.bounds,
@@ -239,7 +225,6 @@ class CoarseParams(Params, owner="coarse"):
         d.setdefault("block_margin", None)
         d.setdefault("group_gap", 0.0)  # stores written before element groups: one group per segment
         d.setdefault("sparse_factor", 0.0)  # stores written before the sparse pass: one pass
-        d.setdefault("support_spacing", None)  # stores written before: min_support points as given
         r = d.pop("ransac")
         if d.get("cluster_epsilon") is None and r["cluster_epsilon"] != RansacParams.cluster_epsilon:
             d["cluster_epsilon"] = r["cluster_epsilon"]

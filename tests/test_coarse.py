@@ -234,16 +234,12 @@ def _true_spacing_quantile(store: Path, q: float) -> float:
 
 def test_automatic_eps_follows_the_scan_spacing_not_the_tiles(scan, tiled20, tmp_path):
     """The automatic eps is EPS_FACTOR x the 25 % spacing quantile measured on windows of
-    the scan; it matches the spacing of all points and does not move with the tile size.
-    With ``support_spacing``, the minimum support the tiles use is scaled by the 75 %
-    quantile measured on the same windows."""
+    the scan; it matches the spacing of all points and does not move with the tile size."""
     from hollowtree.pipeline.coarse import (
         EPS_FACTOR,
         EPS_QUANTILE,
         SPACING_STAGE,
         SPACING_UNITS,
-        SUPPORT_QUANTILE,
-        scaled_support,
         scan_spacing,
     )
 
@@ -261,15 +257,11 @@ def test_automatic_eps_follows_the_scan_spacing_not_the_tiles(scan, tiled20, tmp
     one = tmp_path / "one"
     with task_runner("sync", progress=False) as run:
         ingest([str(scan)], str(one), IngestParams(tile_size=500.0, buffer=2.0), runner=run)
-        run_coarse(str(one), CoarseParams(support_spacing=0.05), runner=run)
+        run_coarse(str(one), CoarseParams(), runner=run)
     stage = RunStore.open(one).attrs["stages"]["coarse"]
     assert stage["eps"] == pytest.approx(EPS_FACTOR * stage["spacing"])
     assert stage["params"]["cluster_epsilon"] == pytest.approx(max(0.15, 2.0 * stage["eps"] / 3.0))
     assert stage["spacing"] == pytest.approx(measured, rel=0.1)
-    far = stage["far_spacing"]
-    assert far == pytest.approx(_true_spacing_quantile(one, SUPPORT_QUANTILE), rel=0.1)
-    support = stage["params"]["ransac"]["min_support"]
-    assert support == scaled_support(CoarseParams().min_support, 0.05, far) != CoarseParams().min_support
 
 
 def _tiny_las(path: Path, pts: np.ndarray) -> Path:
