@@ -70,6 +70,7 @@ VAL_SEEDS = {
     "gen-v4": "`tree-v39`, `gen-v4` sites",
     "tree-v40": "`tree-v40`: the look-ahead from any node (default; `gen-v4`)",
     "support-spacing": "rejected: RANSAC's minimum support follows the scan's spacing (`coarse.support_spacing`)",
+    "split-p30": "rejected: the split model refitted with procedural training sites 0-29 (seeds 0-1)",
 }
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
 BEGIN = re.compile(r"<!-- generated: ([\w.-]+) -->\n")
