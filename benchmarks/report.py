@@ -457,7 +457,7 @@ def _three_rows(name: str) -> tuple[float, float, float, float | None] | None:
 def val_seeds() -> str:
     """Each variant of :data:`VAL_SEEDS`: each row's F1 averaged over tree seeds 0-2, the F1 sum
     per seed, the sums' mean and range (the selection rule from ``tree-v36``), and the mean
-    with the 10 M row on its 14 sites (the rule from stop 88 of issue 43), where run."""
+    with the 10 M row on its 14 sites (the rule after ``tree-v40``), where run."""
     out = ["| variant | 0.5-2 M | 4 M | 10 M | F1 sum, seeds 0 / 1 / 2 | mean | range | mean, 10 M on 14 sites |",
            "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for name, what in VAL_SEEDS.items():
