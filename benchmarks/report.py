@@ -37,22 +37,22 @@ RESULTS = REPO / "benchmarks" / "results"
 #: The latest run of each kind of element-recall result (``bench_generalize.py --json``).
 #: These are the figures of docs/generalize.md; edit the file names when a newer run replaces one.
 LATEST = {
-    "test": "generalize-test-tree-v40.json",
+    "test": "generalize-test-tree-v42.json",
     "test-5m": "generalize-test-5m-gen-v3.json",
-    "val-4m": "generalize-val-4m-tree-v40.json",
-    "val-1m": "generalize-val-density-1m-tree-v40.json",
-    "val-10m": "generalize-val-density-10m-tree-v40.json",
-    "val-3m": "generalize-val-density-3m-tree-v40.json",
+    "val-4m": "generalize-val-4m-tree-v42.json",
+    "val-1m": "generalize-val-density-1m-tree-v42.json",
+    "val-10m": "generalize-val-density-10m-tree-v42.json",
+    "val-3m": "generalize-val-density-3m-tree-v42.json",
     # the second validation batch (seeds 100 014-100 027) at the hidden scenes' density
     "val-5m-b": "generalize-val-5m-b-tree-v39.json",
     # the dome batch: the next 6 validation seeds of each family with domes (100 028-100 068)
-    "val-domes": "generalize-val-domes-tree-v40.json",
+    "val-domes": "generalize-val-domes-tree-v42.json",
     # diagnose_generalize.py --density over the 1 M, 3 M and 10 M rows (tree seed 0)
-    "density": "generalize-val-density-visible-tree-v40.json",
-    "val": "generalize-val-tree-v40.json",
+    "density": "generalize-val-density-visible-tree-v42.json",
+    "val": "generalize-val-tree-v42.json",
     # the latest run with the paper's energy path (other runs pass --no-energy; it runs with
     # tree.verify=false, so tree-v25 and tree-v26 did not change it)
-    "test-energy": "generalize-test-tree-v40.json",
+    "test-energy": "generalize-test-tree-v42.json",
     # docs/results.md: the paper's five sites, a report set (hollowtree evaluate --seeds 3)
     "five-sites": "five-sites-10m-tree-v39.json",
 }
@@ -61,16 +61,12 @@ LATEST = {
 #: docs/generalize.md): the name part of their JSONs (``generalize-val-4m-<name>.json`` is
 #: seed 0, ``...-<name>-seed1.json`` seed 1, ...), in the order they were run.
 VAL_SEEDS = {
-    "group300k": "`tree.max_group_points` 1 M -> 300 k",
-    "coarse-cut": "rejected: S2 and S3 also cut at their most prominent peak",
     "shape-check": "`tree-v37`: the element check with its points' shape",
-    "class-thr": "not adopted: the check's dome 0.5 and minaret 0.3, chosen on these sites",
-    "oof-thr": "rejected: the thresholds chosen on training seeds",
     "oof-dm": "`tree-v39`: the dome and minaret thresholds chosen on training seeds",
-    "gen-v4": "`tree-v39`, `gen-v4` sites",
-    "tree-v40": "`tree-v40`: the look-ahead from any node (default; `gen-v4`)",
+    "tree-v40": "`tree-v40`: the look-ahead from any node (`gen-v4`)",
     "support-spacing": "rejected: RANSAC's minimum support follows the scan's spacing (`coarse.support_spacing`)",
     "split-p30": "rejected: the split model refitted with procedural training sites 0-29 (seeds 0-1)",
+    "tree-v42": "`tree-v42`: arcade rows along circles, cells that partition a row (default)",
 }
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
 BEGIN = re.compile(r"<!-- generated: ([\w.-]+) -->\n")

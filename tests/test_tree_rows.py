@@ -1,5 +1,6 @@
 """Arcade rows after the tree (tree/rows.py): pieces take their piers, gaps get bays, end
-bays lose their end wall, pieces inside a bay join it; curved or short rows change nothing."""
+bays lose their end wall, pieces inside a bay join it, straight or curved; short rows
+change nothing."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import numpy as np
 import pytest
 
 from hollowtree.classes import ClassId
+from hollowtree.tree import rows
 from hollowtree.tree.rows import ArcadeCells, apply_cells, arcade_cells, instance_sample
 
 PITCH = 3.6
@@ -62,11 +64,11 @@ def test_a_row_of_bays_is_completed():
     # the last bay is cut to one pitch
     k, (t0, t1) = _cell(cells, 8)
     assert cells.trim[k]
-    assert cells.take[k] == 2
+    assert cells.take[k] == 3
     assert t1 - t0 == pytest.approx(PITCH, abs=0.15)
-    # full bays take only dome points
-    assert set(cells.instance[cells.take == 1].tolist()) == {4, 100, 101}
-    assert set(cells.instance[cells.take == 2].tolist()) == {1, 2, 3, 5, 6, 7, 8}
+    # pieces and gaps take wall, other, pillar, dome and arch points; full bays wall, dome and arch
+    assert set(cells.instance[cells.take == 2].tolist()) == {4, 100, 101}
+    assert set(cells.instance[cells.take == 3].tolist()) == {1, 2, 3, 5, 6, 7, 8}
     assert cells.instance[cells.trim].tolist() == [8]
 
 
@@ -80,32 +82,35 @@ def test_cells_change_the_points():
                     [9.5 * PITCH, 0.0, 2.0],         # bay 8 itself
                     [3 * PITCH + 0.2, 0.0, 9.0],     # above the row's top: stays
                     [0.5 * PITCH, 0.0, 2.0],         # a dome point in full bay 1: joins it
-                    [0.5 * PITCH, 0.2, 1.0],         # a wall point there: stays
-                    [0.5 * PITCH, 0.0, 7.0]])        # a dome point above it: stays
-    D = int(ClassId.DOME)
-    cls = np.array([WALL, WALL, WALL, ARCH, ARCH, WALL, D, WALL, D])
-    inst = np.array([50, 50, 50, 8, 8, 50, 60, 50, 60])
+                    [0.5 * PITCH, 0.2, 1.0],         # a wall point there (a pier face): joins it
+                    [0.5 * PITCH, 0.0, 7.0],         # a dome point above it: stays
+                    [0.9 * PITCH, 0.0, 2.0],         # bay 2's overreach into bay 1's cell: bay 1's
+                    [0.5 * PITCH, 0.0, 2.0]])        # a pillar point in a full bay's cell: stays
+    D, P = int(ClassId.DOME), int(ClassId.PILLAR)
+    cls = np.array([WALL, WALL, WALL, ARCH, ARCH, WALL, D, WALL, D, ARCH, P])
+    inst = np.array([50, 50, 50, 8, 8, 50, 60, 50, 60, 2, 70])
     c, i = apply_cells(xyz, cls, inst, cells)
-    assert c.tolist() == [ARCH, WALL, ARCH, WALL, ARCH, WALL, ARCH, WALL, D]
-    assert i.tolist() == [4, 50, 100, 0, 8, 50, 1, 50, 60]
+    assert c.tolist() == [ARCH, WALL, ARCH, WALL, ARCH, WALL, ARCH, ARCH, D, ARCH, P]
+    assert i.tolist() == [4, 50, 100, 0, 8, 50, 1, 1, 60, 1, 70]
 
 
 def test_a_bay_that_is_one_face_takes_the_rest_of_its_bay():
     """A bay found as its front face alone (a pitch wide but 0.15 m of the wall's 1 m deep)
     is a piece: its cell spans the wall's depth and takes the intrados and back face that
-    were left in the wall. Without the depth test it would be full and take nothing."""
+    were left in the wall."""
     rng = np.random.default_rng(5)
     row = {i + 1: _box(rng, i * PITCH, (i + 1) * PITCH) for i in range(6)}
     row[3] = _box(rng, 2 * PITCH, 3 * PITCH, y=(0.35, 0.5))
     cells, absorbed = arcade_cells(_samples(row), 100)
     assert absorbed == {}
-    assert set(cells.instance[cells.take == 1].tolist()) == {3}
+    assert set(cells.instance[cells.take == 2].tolist()) == {3}
     k, (t0, t1) = _cell(cells, 3)
     assert (t0, t1) == (pytest.approx(2 * PITCH, abs=0.1), pytest.approx(3 * PITCH, abs=0.1))
-    xyz = np.array([[2.5 * PITCH, -0.45, 1.0], [2.5 * PITCH, 0.0, 4.0], [1.5 * PITCH, -0.45, 1.0]])
-    c, i = apply_cells(xyz, [WALL, WALL, WALL], [50, 50, 50], cells)
-    assert c.tolist() == [ARCH, ARCH, WALL]
-    assert i.tolist() == [3, 3, 50]
+    xyz = np.array([[2.5 * PITCH, -0.45, 1.0], [2.5 * PITCH, 0.0, 4.0], [1.5 * PITCH, -0.45, 1.0],
+                    [2.5 * PITCH, 0.0, 2.0]])
+    c, i = apply_cells(xyz, [WALL, WALL, WALL, int(ClassId.OTHER)], [50, 50, 50, 0], cells)
+    assert c.tolist() == [ARCH, ARCH, ARCH, ARCH]
+    assert i.tolist() == [3, 3, 2, 3]
 
 
 def test_the_row_may_run_any_way():
@@ -122,19 +127,90 @@ def test_the_row_may_run_any_way():
     np.testing.assert_allclose(np.diff(c0.box[:, :2], axis=1), np.diff(c1.box[:, :2], axis=1), atol=0.15)
 
 
-def test_curved_short_and_portal_rows_change_nothing():
-    rng = np.random.default_rng(3)
-    # a curved arcade: 12 bays of 3.6 m on a 34 m radius (6 degrees each: neighbours are parallel)
+def _curved(rng, radius=34.0, step=6.0, n=12):
+    """An arcade of ``n`` bays of ``step`` degrees on a circle (3.6 m on 34 m: neighbours
+    are parallel); bay 6 is a piece (its intrados, its pier faces left in the wall)."""
     curved = {}
-    for k in range(12):
-        a0, a1 = np.radians(6.0 * k), np.radians(6.0 * (k + 1))
+    for k in range(n):
+        a0, a1 = np.radians(step * k), np.radians(step * (k + 1))
         a = rng.uniform(a0, a1, 600)
-        r = rng.uniform(33.5, 34.5, 600)
+        r = rng.uniform(radius - 0.5, radius + 0.5, 600)
         pts = np.column_stack([r * np.cos(a), r * np.sin(a), rng.uniform(0, 5, 600)])
         curved[k + 1] = pts if k != 5 else pts[(a > a0 + 0.015) & (a < a1 - 0.015)]
-    cells, absorbed = arcade_cells(_samples(curved), 100)
-    assert len(cells) == 0
+    return curved
+
+
+def test_a_curved_row_is_completed_in_its_own_frames():
+    """A curved arcade is a row along its circle: the piece takes its pier faces, each cell
+    has its own frame (the tangent at its middle), and the cells tile the arc."""
+    rng = np.random.default_rng(3)
+    cells, absorbed = arcade_cells(_samples(_curved(rng)), 100)
     assert absorbed == {}
+    assert sorted(cells.instance.tolist()) == list(range(1, 13))
+    assert set(cells.instance[cells.take == 2].tolist()) == {6}
+    assert not cells.trim.any()
+    # every frame is a point on the circle with its tangent
+    o, u = cells.frame[:, :2], cells.frame[:, 2:]
+    np.testing.assert_allclose(np.hypot(*o.T), 34.0, atol=0.3)
+    np.testing.assert_allclose(np.abs(np.sum(o * u, axis=1)) / 34.0, 0.0, atol=0.02)
+    # the piece's cell reaches its neighbours' edges: one pitch (3.56 m of arc) wide
+    (k,) = np.flatnonzero(cells.instance == 6)
+    assert cells.box[k, 1] - cells.box[k, 0] == pytest.approx(np.radians(6.0) * 34.0, abs=0.15)
+    # a pier face of bay 6 left in the wall joins it; wall behind the arcade stays
+    a = np.radians([30.3, 30.3, 33.0])
+    r = np.array([34.2, 37.0, 34.0])
+    xyz = np.column_stack([r * np.cos(a), r * np.sin(a), [2.0, 2.0, 2.0]])
+    c, i = apply_cells(xyz, [WALL, WALL, ARCH], [0, 0, 6], cells)
+    assert c.tolist() == [ARCH, WALL, ARCH]
+    assert i.tolist() == [6, 0, 6]
+
+
+def test_the_storeys_of_a_curved_facade_share_its_circle():
+    """Two storeys of one curved facade: the upper one's bays lie on the lower row's circle
+    and make a row of their own, at their own base."""
+    rng = np.random.default_rng(5)
+    lower = _curved(rng)
+    upper = {100 + i: p + (0.0, 0.0, 6.0) for i, p in _curved(rng).items()}
+    cells, absorbed = arcade_cells(_samples({**lower, **upper}), 1000)
+    assert absorbed == {}
+    assert sorted(cells.instance.tolist()) == [*range(1, 13), *range(101, 113)]
+    assert set(cells.instance[cells.take == 2].tolist()) == {6, 106}
+    for i, z0 in ((6, 0.0), (106, 6.0)):
+        (k,) = np.flatnonzero(cells.instance == i)
+        assert cells.box[k, 4] == pytest.approx(z0 - 0.2, abs=0.1)
+
+
+def test_a_straight_stretch_of_a_curved_row_gives_way_to_it(monkeypatch):
+    """Bays 1-3 of a curved arcade (10 degrees each on 30 m) linked apart from the rest
+    (bay 3 pushed 0.5 m out) are straight to 0.6 m, a row of their own; the curved row
+    grown from bays 4-12 holds them, and the straight row gives way to it."""
+    rng = np.random.default_rng(6)
+    b = _curved(rng, radius=30.0, step=10.0, n=12)
+    a = np.arctan2(b[3][:, 1], b[3][:, 0])
+    b[3] = b[3] + np.column_stack([0.5 * np.cos(a), 0.5 * np.sin(a), np.zeros(len(a))])
+    bays = [rows._bay(i, p, np.ones(len(p))) for i, p in sorted(b.items())]
+    assert sorted(sorted(x.id for x in r) for r in rows._rows(bays)) == [[1, 2, 3], list(range(4, 13))]
+    ((row, line),) = rows._lines(bays)
+    assert isinstance(line, rows._Arc)
+    assert line.r == pytest.approx(30.0, abs=0.3)
+    assert sorted(x.id for x in row) == list(range(1, 13))
+    monkeypatch.setattr(rows, "_arc", lambda seed, free: None)
+    ((row, line),) = rows._lines(bays)
+    assert isinstance(line, rows._Line)
+    assert sorted(x.id for x in row) == [1, 2, 3]
+
+
+def test_a_circle_too_small_or_too_few_bays_is_no_row():
+    rng = np.random.default_rng(4)
+    # three bays on a 6 m circle: neighbours' axes 35 degrees apart, never linked
+    assert len(arcade_cells(_samples(_curved(rng, radius=6.0, step=35.0, n=3)), 100)[0]) == 0
+    # two bays of the curved arcade are no row
+    two = {i: p for i, p in _curved(rng).items() if i <= 2}
+    assert len(arcade_cells(_samples(two), 100)[0]) == 0
+
+
+def test_short_and_portal_rows_change_nothing():
+    rng = np.random.default_rng(3)
     # two bays are no row
     two = {1: _box(rng, 0, PITCH), 2: _box(rng, PITCH + 0.5, 2 * PITCH - 0.5, z1=3.5)}
     assert len(arcade_cells(_samples(two), 100)[0]) == 0
@@ -143,7 +219,7 @@ def test_curved_short_and_portal_rows_change_nothing():
     row[5] = _box(rng, 4 * PITCH, 5.5 * PITCH, z1=9.0)
     cells, _ = arcade_cells(_samples(row), 100)
     assert len(cells)
-    assert (cells.take == 2).all()
+    assert (cells.take == 3).all()
     assert not cells.trim.any()
 
 

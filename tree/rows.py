@@ -14,7 +14,14 @@ the merge across groups (tree/merge.py):
    (``ROW_BASE``) are linked; a row is a linked set of at least ``ROW_MIN_BAYS`` instances,
    its line fitted through their centres, and it must be straight: at least
    ``ROW_STRAIGHT_SHARE`` of them within ``ROW_STRAIGHT`` of the line (the others leave
-   the row). A curved arcade (the Roman facade) is not a row, and nothing changes there.
+   the row). A linked set on no line is the seed of a curved row (tree-v41): the circle
+   through its bays' centres, grown over the arch instances whose centres lie near it
+   (``ARC_GROW``), axes along its tangent and bases at the seed's (:func:`_arc`), then
+   kept within ``ROW_STRAIGHT`` of it; the other storeys of the facade on the same circle
+   seed rows of their own, and a straight row with half its bays in a longer curved row
+   is a stretch of it. Along a curved row ``t`` is the arc length and ``q`` the distance
+   inside the circle, and each cell is stored in its own straight frame, the tangent at
+   its middle. Steps 2 and 3 are the same for both.
 2. **Pitch and cells.** The pitch is the median spacing of the bays' mid-points along the
    line; a bay at least ``FULL_SHARE`` of the pitch wide is *full*, unless it is under
    ``DEEP_SHARE`` of the wide bays' median depth across the line (one face of a bay,
@@ -26,12 +33,15 @@ the merge across groups (tree/merge.py):
    widened by ``BAND_PAD`` and ``Z_PAD``).
    Pieces of one bay are one first: a piece whose mid-point lies in a full bay is part
    of it, and two neighbouring pieces no wider together than ``PIECES`` pitches are one.
-3. **What changes.**
-   - A piece's cell takes the points of the wall, other, pillar and dome classes inside
-     it (``ROW_TAKE``; `take` 1): its pier faces and the band of wall above it, to the
-     row's top, as its full neighbours have. A full bay's cell takes the dome points
-     inside it (`take` 2): no dome stands in an arcade's wall below its top, and HollowNet
-     calls some pieces of bays dome.
+3. **What changes.** The cells partition the row's band (tree-v42):
+   - A piece's cell takes the points of the wall, other, pillar, dome and arch classes
+     inside it (``PIECE_TAKE``; `take` 2): its pier faces and the band of wall above it,
+     to the row's top, as its full neighbours have, and what a neighbour took beyond its
+     cell. A full bay's cell takes the wall, dome and arch points inside it
+     (``FULL_TAKE``; `take` 3): the pier faces the tree left in the wall, and a
+     neighbour's overreach (a storey cut at a plane's edge, not at a pier's middle,
+     holds one opening and a sixth of each neighbour); no dome stands in an arcade's
+     wall below its top, and HollowNet calls some pieces of bays dome.
    - A gap between two bays of ``k`` pitches (within ``GAP_TOLERANCE``) holds ``k - 1``
      bays: each gets a new instance with a cell of equal share of the gap, unless an arch
      instance a full bay wide already lies in it (a bay the row left out).
@@ -47,8 +57,8 @@ the merge across groups (tree/merge.py):
      of that bay (:func:`arcade_cells`'s map, applied like the merge map).
 
 Not in the paper, whose tree never sees an arcade as a row. Measured on Wazir Khan (three
-seeds, docs/decisions/method.md, "`tree-v15`"); the temple and Derawar have too few arch instances to make a
-row, the Roman arcades are curved and Khudabad's is whole. Pure NumPy.
+seeds, docs/decisions/method.md, "`tree-v15`"), curved rows on the validation seeds
+("`tree-v41`"). Pure NumPy.
 """
 
 from __future__ import annotations
@@ -61,7 +71,7 @@ import numpy.typing as npt
 
 from hollowtree.classes import ClassId
 
-__all__ = ["ROW_TAKE", "FULL_TAKE", "ArcadeCells", "arcade_cells", "apply_cells", "instance_sample", "SAMPLE_POINTS"]
+__all__ = ["ROW_TAKE", "PIECE_TAKE", "FULL_TAKE", "ArcadeCells", "arcade_cells", "apply_cells", "instance_sample", "SAMPLE_POINTS"]
 
 #: Points sampled from each arch and dome instance for the row analysis (seeded).
 SAMPLE_POINTS = 4096
@@ -79,6 +89,15 @@ ROW_BASE = 0.4
 #: A row is straight when ``ROW_STRAIGHT_SHARE`` of its bays are within ``ROW_STRAIGHT`` m of its line.
 ROW_STRAIGHT = 0.6
 ROW_STRAIGHT_SHARE = 0.8
+#: A curved row's circle: its radius (m) at least this (neighbouring bays' axes are
+#: parallel, ``ROW_PARALLEL``, only when the pitch is under about a quarter of the radius)
+#: and at most ``ARC_MAX_RADIUS`` (beyond it the bays are on no circle the fit can tell).
+ARC_MIN_RADIUS = 8.0
+ARC_MAX_RADIUS = 500.0
+#: Rounds of growing a curved row (take the bays within ``ARC_GROW`` m of the circle,
+#: refit the circle).
+ARC_ROUNDS = 5
+ARC_GROW = 2 * ROW_STRAIGHT
 #: A bay at least this share of the pitch wide is full, unless it is thin: less deep across
 #: the line than ``DEEP_SHARE`` of the wide bays' median depth (one face of a bay, its
 #: intrados and other face left in the wall).
@@ -102,10 +121,12 @@ BAND_PAD = 0.2
 Z_PAD = (0.2, 0.05)
 #: Points of a cut end bay farther than this (m) beyond its cell go back to the wall.
 TRIM_PAD = 0.05
-#: Classes whose points a piece's cell (or a gap's) takes (`take` 1), and a full bay's (`take` 2).
+#: Classes whose points a cell takes: a lone piece's (tree/frames.py; `take` 1), a row's
+#: piece's or gap's (`take` 2), a row's full bay's (`take` 3).
 ROW_TAKE: tuple[int, ...] = (int(ClassId.WALL), int(ClassId.OTHER), int(ClassId.PILLAR), int(ClassId.DOME))
-FULL_TAKE: tuple[int, ...] = (int(ClassId.DOME),)
-_TAKE = {1: ROW_TAKE, 2: FULL_TAKE}
+PIECE_TAKE: tuple[int, ...] = (*ROW_TAKE, int(ClassId.ARCH))
+FULL_TAKE: tuple[int, ...] = (int(ClassId.WALL), int(ClassId.DOME), int(ClassId.ARCH))
+_TAKE = {1: ROW_TAKE, 2: PIECE_TAKE, 3: FULL_TAKE}
 _ARCH = int(ClassId.ARCH)
 _WALL = int(ClassId.WALL)
 
@@ -115,10 +136,12 @@ class ArcadeCells:
     """The cells that change labels (one row per cell).
 
     ``frame``: ``(m, 4)`` the row's origin ``x, y`` and unit direction ``ux, uy`` (store
-    coordinates, metres); ``box``: ``(m, 6)`` ``t0, t1`` along the line, ``q0, q1`` across
+    coordinates, metres; a curved row's cell: the point of the circle at its middle and the
+    tangent there); ``box``: ``(m, 6)`` ``t0, t1`` along the line, ``q0, q1`` across
     it (towards ``(-uy, ux)``), ``z0, z1``; ``instance``: the bay's instance id (merged id;
     a new bay's id is given by the caller, see :func:`arcade_cells`); ``take``: the cell
-    takes the ``ROW_TAKE`` (1) or ``FULL_TAKE`` (2) points inside it (0: none); ``trim``: the bay's points outside ``t0 ..
+    takes the ``ROW_TAKE`` (1), ``PIECE_TAKE`` (2) or ``FULL_TAKE`` (3) points inside it
+    (0: none); ``trim``: the bay's points outside ``t0 ..
     t1`` (by more than ``TRIM_PAD``) go back to the wall.
     """
 
@@ -234,6 +257,172 @@ def _rows(bays: list[_Bay]) -> list[list[_Bay]]:
     return [g for g in groups.values() if len(g) >= ROW_MIN_BAYS]
 
 
+@dataclass(frozen=True)
+class _Line:
+    """A straight row: ``t`` along ``u`` from ``o``, ``q`` across it (towards ``(-uy, ux)``)."""
+
+    o: npt.NDArray[np.float64]
+    u: npt.NDArray[np.float64]
+
+    def tq(self, xy: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        d = xy - self.o
+        return d @ self.u, d @ np.array([-self.u[1], self.u[0]])
+
+    def frame(self, t0: float, t1: float) -> tuple[list[float], float]:
+        """The store frame of a cell ``t0 .. t1`` and the shift of its ``t`` in that frame."""
+        return [float(self.o[0]), float(self.o[1]), float(self.u[0]), float(self.u[1])], 0.0
+
+
+@dataclass(frozen=True)
+class _Arc:
+    """A curved row on a circle (centre ``c``, radius ``r``): ``t`` the arc length from the
+    angle ``a0`` (counter-clockwise), ``q`` the distance inside the circle."""
+
+    c: npt.NDArray[np.float64]
+    r: float
+    a0: float
+
+    def tq(self, xy: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        d = xy - self.c
+        a = np.mod(np.arctan2(d[:, 1], d[:, 0]) - self.a0, 2 * np.pi)
+        return self.r * a, self.r - np.hypot(d[:, 0], d[:, 1])
+
+    def frame(self, t0: float, t1: float) -> tuple[list[float], float]:
+        """A cell's own straight frame: the circle's tangent at the cell's middle ``tm``
+        (so ``t - tm`` and ``q`` hold in it to ``w**2 / 8r``, a centimetre for a 5 m cell
+        on a 30 m circle)."""
+        tm = 0.5 * (t0 + t1)
+        a = self.a0 + tm / self.r
+        return ([float(self.c[0] + self.r * np.cos(a)), float(self.c[1] + self.r * np.sin(a)),
+                 float(-np.sin(a)), float(np.cos(a))], tm)
+
+
+def _circle(xy: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], float] | None:
+    """The least-squares circle through points ``xy`` (algebraic fit); None when they are on
+    no circle of at most ``ARC_MAX_RADIUS``."""
+    if len(xy) < 3:
+        return None
+    m = xy.mean(axis=0)
+    d = xy - m
+    sol, *_ = np.linalg.lstsq(np.column_stack([2 * d, np.ones(len(d))]), (d ** 2).sum(axis=1), rcond=None)
+    r2 = float(sol[2] + sol[0] ** 2 + sol[1] ** 2)
+    if not np.isfinite(r2) or r2 <= 0 or r2 > ARC_MAX_RADIUS ** 2:
+        return None
+    return m + sol[:2], float(np.sqrt(r2))
+
+
+def _on_arc(bays: list[_Bay], c: npt.NDArray[np.float64], r: float, base: float | None,
+            tol: float = ROW_STRAIGHT) -> list[_Bay]:
+    """The bays on the circle: centre within ``tol`` of it, axis along its tangent
+    (``ROW_PARALLEL``), base within ``ROW_BASE`` of ``base`` (any base when None)."""
+    out = []
+    for b in bays:
+        d = b.c - c
+        rad = float(np.hypot(*d))
+        if rad <= 0 or abs(rad - r) > tol or (base is not None and abs(b.zmin - base) > ROW_BASE):
+            continue
+        if abs(float(b.u @ np.array([-d[1], d[0]]))) / rad >= ROW_PARALLEL:
+            out.append(b)
+    return out
+
+
+def _arc(seed: list[_Bay], free: list[_Bay]) -> tuple[list[_Bay], _Arc] | None:
+    """A curved row grown from ``seed`` (bays on no straight line): the circle through
+    their centres, the ``free`` bays near it (within ``ARC_GROW``: a short seed's circle is
+    off by metres), the circle refitted through those, until the bays stay the same (at
+    most ``ARC_ROUNDS`` times); then the bays within ``ROW_STRAIGHT`` of the last circle,
+    and the circle through them. A row when it holds at least
+    ``ROW_MIN_BAYS`` bays, its radius is at least ``ARC_MIN_RADIUS`` and it bends: its bays
+    are on no line (the arc's sagitta over them above ``ROW_STRAIGHT``)."""
+    base = float(np.median([b.zmin for b in seed]))
+    fit = _circle(np.array([b.c for b in seed]))
+    row: list[_Bay] = []
+    for _ in range(ARC_ROUNDS):
+        if fit is None:
+            return None
+        grown = _on_arc(free, *fit, base, ARC_GROW)
+        if len(grown) < ROW_MIN_BAYS:
+            return None
+        same = {b.id for b in grown} == {b.id for b in row}
+        row = grown
+        if same:
+            break
+        fit = _circle(np.array([b.c for b in row]))
+    if fit is not None:
+        row = _on_arc(row, *fit, base)
+        fit = _circle(np.array([b.c for b in row]))
+    if fit is None or fit[1] < ARC_MIN_RADIUS:
+        return None
+    c, r = fit
+    row = _on_arc(row, c, r, base)
+    if len(row) < ROW_MIN_BAYS:
+        return None
+    ang = np.sort(np.mod([np.arctan2(b.c[1] - c[1], b.c[0] - c[0]) for b in row], 2 * np.pi))
+    gaps = np.diff(np.r_[ang, ang[0] + 2 * np.pi])
+    k = int(np.argmax(gaps))
+    span = 2 * np.pi - float(gaps[k])
+    if r * (1 - np.cos(min(span, np.pi) / 2)) <= ROW_STRAIGHT:
+        return None  # on a line: a straight row's business
+    return row, _Arc(c, r, float(ang[k] + 0.5 * gaps[k]))  # the seam in the widest gap between bays
+
+
+def _lines(bays: list[_Bay]) -> list[tuple[list[_Bay], _Line | _Arc]]:
+    """The rows and their lines: straight rows of linked bays, and curved rows grown from
+    the linked sets on no straight line. A straight row with half its bays in a longer
+    curved row is a stretch of that curve (three bays of a 30 m circle are straight to
+    0.5 m), and gives way to it."""
+    lines: list[tuple[list[_Bay], _Line | _Arc]] = []
+    bent: list[list[_Bay]] = []
+    for row in _rows(bays):
+        u = np.mean([b.u * np.sign(b.u @ row[0].u) for b in row], axis=0)
+        u /= np.linalg.norm(u)
+        cm = np.array([b.c for b in row])
+        o = cm.mean(axis=0)
+        fit = np.linalg.eigh(np.cov((cm - o).T))[1][:, 1]
+        fit = fit * np.sign(fit @ u)
+        if np.ptp((cm - o) @ fit) > 6.0 and abs(float(fit @ u)) >= ROW_PARALLEL:
+            u = fit  # the line through the bays' centres, when they spread along it
+        nrm = np.array([-u[1], u[0]])
+        off = (cm - o) @ nrm
+        near = np.abs(off - np.median(off)) <= ROW_STRAIGHT
+        if near.mean() < ROW_STRAIGHT_SHARE or near.sum() < ROW_MIN_BAYS:
+            bent.append(row)  # a curved arcade, or bays on no one line
+            continue
+        lines.append(([b for b, k in zip(row, near, strict=True) if k], _Line(o, u)))
+    arcs: list[tuple[list[_Bay], _Line | _Arc]] = []
+    taken: set[int] = set()
+    seeds = sorted(bent, key=len, reverse=True)
+    while seeds:
+        seed = seeds.pop(0)
+        if any(b.id in taken for b in seed):
+            continue
+        grown = _arc(seed, [b for b in bays if b.id not in taken])
+        if grown is None:
+            continue
+        arcs.append(grown)
+        taken |= {b.id for b in grown[0]}
+        # the storeys of a curved facade share its circle: bays on it at other bases seed rows
+        arc = grown[1]
+        on = sorted(_on_arc([b for b in bays if b.id not in taken], arc.c, arc.r, None), key=lambda b: b.zmin)
+        level: list[_Bay] = []
+        for b in [*on, None]:
+            if b is not None and (not level or b.zmin - level[0].zmin <= ROW_BASE):
+                level.append(b)
+                continue
+            if len(level) >= ROW_MIN_BAYS:
+                seeds.insert(0, level)
+            level = [b] if b is not None else []
+    out = [(row, line) for row, line in lines
+           if not any(2 * len({b.id for b in row} & {b.id for b in arc}) >= len(row) and len(arc) > len(row)
+                      for arc, _ in arcs)]
+    used = {b.id for row, _ in out for b in row}
+    for arc, line in arcs:
+        arc = [b for b in arc if b.id not in used]
+        if len(arc) >= ROW_MIN_BAYS:
+            out.append((arc, line))
+    return out
+
+
 def arcade_cells(samples: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]], next_id: int,
                  domes: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]] | None = None
                  ) -> tuple[ArcadeCells, dict[int, int]]:
@@ -266,25 +455,10 @@ def arcade_cells(samples: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]], nex
     takes: list[int] = []
     trims: list[bool] = []
     absorbed: dict[int, int] = {}
-    for row in _rows(bays):
-        u = np.mean([b.u * np.sign(b.u @ row[0].u) for b in row], axis=0)
-        u /= np.linalg.norm(u)
-        cm = np.array([b.c for b in row])
-        o = cm.mean(axis=0)
-        fit = np.linalg.eigh(np.cov((cm - o).T))[1][:, 1]
-        fit = fit * np.sign(fit @ u)
-        if np.ptp((cm - o) @ fit) > 6.0 and abs(float(fit @ u)) >= ROW_PARALLEL:
-            u = fit  # the line through the bays' centres, when they spread along it
-        nrm = np.array([-u[1], u[0]])
-        off = (cm - o) @ nrm
-        near = np.abs(off - np.median(off)) <= ROW_STRAIGHT
-        if near.mean() < ROW_STRAIGHT_SHARE or near.sum() < ROW_MIN_BAYS:
-            continue  # a curved arcade, or bays on no one line
-        row = [b for b, k in zip(row, near, strict=True) if k]
+    for row, line in _lines(bays):
         ext = []
         for b in row:
-            t = (b.pts[:, :2] - o) @ u
-            q = (b.pts[:, :2] - o) @ nrm
+            t, q = line.tq(b.pts[:, :2])
             ext.append((_wpct(t, b.w, 1), _wpct(t, b.w, 99), _wpct(q, b.w, 2), _wpct(q, b.w, 98)))
         order = np.argsort([lo + hi for lo, hi, _, _ in ext], kind="stable")
         row = [row[k] for k in order]
@@ -333,7 +507,6 @@ def arcade_cells(samples: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]], nex
         q1 = float(np.median([ext[k][3] for k in fb])) + BAND_PAD
         z0 = float(np.median([b.zmin for b in row])) - Z_PAD[0]
         z1 = float(np.median([row[k].zmax for k in fb])) + Z_PAD[1]
-        frame = [float(o[0]), float(o[1]), float(u[0]), float(u[1])]
         cells: list[tuple[int, float, float, int, bool]] = []  # id (0 = new), t0, t1, take, trim
         last = len(row) - 1
         for k, b in enumerate(row):
@@ -353,14 +526,14 @@ def arcade_cells(samples: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]], nex
                 else:
                     right = left + pitch
                 trim = True
-            cells.append((b.id, left, right, 2 if full[k] else 1, trim))
+            cells.append((b.id, left, right, 3 if full[k] else 2, trim))
         for k in range(len(row) - 1):
             m = (mids[k + 1] - mids[k]) / pitch
             km = int(round(m))
             if km >= 2 and abs(m - km) <= GAP_TOLERANCE:
                 a, z = ext[k][1], ext[k + 1][0]
                 w = (z - a) / (km - 1)
-                cells += [(0, a + j * w, a + (j + 1) * w, 1, False) for j in range(km - 1)]
+                cells += [(0, a + j * w, a + (j + 1) * w, 2, False) for j in range(km - 1)]
         members = {b.id for b in row}
         row_cells: list[tuple[int, float, float]] = []
         for bid, t0, t1, take, trim in cells:
@@ -369,8 +542,7 @@ def arcade_cells(samples: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]], nex
             for b in bays:
                 if b.id in members or b.id in absorbed:
                     continue
-                t = (b.pts[:, :2] - o) @ u
-                q = (b.pts[:, :2] - o) @ nrm
+                t, q = line.tq(b.pts[:, :2])
                 zz = b.pts[:, 2]
                 inside = (t >= t0) & (t < t1) & (q > q0) & (q < q1) & (zz > z0) & (zz < z1)
                 if float(b.w[inside].sum()) >= ABSORB * float(b.w.sum()):
@@ -378,7 +550,7 @@ def arcade_cells(samples: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]], nex
             cid = bid
             if bid == 0:
                 # a gap that holds a whole bay of its own (one the row left out) is no new bay
-                if any(_wpct((g.pts[:, :2] - o) @ u, g.w, 99) - _wpct((g.pts[:, :2] - o) @ u, g.w, 1)
+                if any(_wpct(line.tq(g.pts[:, :2])[0], g.w, 99) - _wpct(line.tq(g.pts[:, :2])[0], g.w, 1)
                        >= FULL_SHARE * pitch for g in grabbed):
                     continue
                 cid = next_id
@@ -387,8 +559,9 @@ def arcade_cells(samples: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]], nex
                 absorbed[g.id] = cid
             row_cells.append((cid, t0, t1))
             if take or trim:
+                frame, shift = line.frame(t0, t1)
                 frames.append(frame)
-                boxes.append([t0, t1, q0, q1, z0, z1])
+                boxes.append([t0 - shift, t1 - shift, q0, q1, z0, z1])
                 ids.append(cid)
                 takes.append(take)
                 trims.append(trim)
@@ -397,8 +570,7 @@ def arcade_cells(samples: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]], nex
                 continue
             dp = np.asarray(dp, dtype=np.float64).reshape(-1, 3)
             dw = np.asarray(dw, dtype=np.float64)
-            t = (dp[:, :2] - o) @ u
-            q = (dp[:, :2] - o) @ nrm
+            t, q = line.tq(dp[:, :2])
             band = (q > q0) & (q < q1) & (dp[:, 2] > z0) & (dp[:, 2] < z1)
             share = [float(dw[band & (t >= t0) & (t < t1)].sum()) for _, t0, t1 in row_cells]
             if share and sum(share) >= ABSORB * float(dw.sum()):
@@ -412,9 +584,11 @@ def arcade_cells(samples: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]], nex
 def apply_cells(xyz: npt.ArrayLike, class_id: npt.ArrayLike, instance: npt.ArrayLike, cells: ArcadeCells
                 ) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint32]]:
     """Class and instance of points (store coordinates) after the cells: a `take` cell's
-    ``ROW_TAKE`` (1) or ``FULL_TAKE`` (2) points inside it join its bay (class arch), a
-    `trim` cell's bay points beyond it go back to the wall (class wall, instance 0). Cells
-    apply in order; the points' coordinates along and across a row are computed once per row.
+    ``ROW_TAKE`` (1), ``PIECE_TAKE`` (2) or ``FULL_TAKE`` (3) points inside it join its bay (class arch), a
+    `trim` cell's bay points beyond it go back to the wall (class wall, instance 0). All
+    trims apply first, then the takes, frame by frame (a straight row has one, a curved row's
+    cells each their own), in order; each frame reads only the points inside its cells'
+    bounding box (the points sorted by x once).
 
     >>> cells = ArcadeCells(np.array([[0.0, 0, 1, 0]]), np.array([[0.0, 2, -1, 1, 0, 3]]),
     ...                     np.array([7]), np.array([1], np.int8), np.array([True]))
@@ -430,28 +604,38 @@ def apply_cells(xyz: npt.ArrayLike, class_id: npt.ArrayLike, instance: npt.Array
         return cls, inst
     frames, row_of = np.unique(cells.frame, axis=0, return_inverse=True)
     row_of = row_of.reshape(-1)
+    for k in np.flatnonzero(cells.trim).tolist():  # trims first: a cut bay's points may lie anywhere
+        ox, oy, ux, uy = cells.frame[k]
+        t = (xyz[:, 0] - ox) * ux + (xyz[:, 1] - oy) * uy
+        t0, t1 = cells.box[k, :2]
+        out = (inst == cells.instance[k]) & ((t < t0 - TRIM_PAD) | (t >= t1 + TRIM_PAD))
+        cls[out] = _WALL
+        inst[out] = 0
+    order = np.argsort(xyz[:, 0], kind="stable")  # each frame reads the points of its cells' x range
+    xs = xyz[order, 0]
     for r in range(len(frames)):
         ox, oy, ux, uy = frames[r]
         ks = np.flatnonzero(row_of == r)
-        d = xyz[:, :2] - (ox, oy)
-        t = d @ (ux, uy)
-        for k in ks[cells.trim[ks]].tolist():  # trims first: a cut bay's points may lie anywhere
-            t0, t1 = cells.box[k, :2]
-            out = (inst == cells.instance[k]) & ((t < t0 - TRIM_PAD) | (t >= t1 + TRIM_PAD))
-            cls[out] = _WALL
-            inst[out] = 0
-        box = cells.box[ks]
-        band = np.flatnonzero((t >= box[:, 0].min()) & (t < box[:, 1].max()) & (xyz[:, 2] > box[:, 4].min())
-                              & (xyz[:, 2] < box[:, 5].max()))
-        if not len(band):
+        ks = ks[cells.take[ks] > 0]
+        if not len(ks):
             continue
-        tb, qb, zb = t[band], d[band] @ (-uy, ux), xyz[band, 2]
+        box = cells.box[ks]
+        t_c = np.concatenate([box[:, 0], box[:, 0], box[:, 1], box[:, 1]])
+        q_c = np.concatenate([box[:, 2], box[:, 3], box[:, 2], box[:, 3]])
+        cx, cy = ox + t_c * ux - q_c * uy, oy + t_c * uy + q_c * ux
+        lo = int(np.searchsorted(xs, cx.min() - 1e-6, side="left"))
+        hi = int(np.searchsorted(xs, cx.max() + 1e-6, side="right"))
+        near = order[lo:hi]
+        near = near[(xyz[near, 1] >= cy.min() - 1e-6) & (xyz[near, 1] <= cy.max() + 1e-6)
+                    & (xyz[near, 2] > box[:, 4].min()) & (xyz[near, 2] < box[:, 5].max())]
+        if not len(near):
+            continue
+        d = xyz[near, :2] - (ox, oy)
+        tb, qb, zb = d @ (ux, uy), d @ (-uy, ux), xyz[near, 2]
         for k in ks.tolist():
-            code = int(cells.take[k])
-            if not code:
-                continue
             t0, t1, q0, q1, z0, z1 = cells.box[k]
-            m = (tb >= t0) & (tb < t1) & (qb > q0) & (qb < q1) & (zb > z0) & (zb < z1) & np.isin(cls[band], _TAKE[code])
-            cls[band[m]] = _ARCH
-            inst[band[m]] = cells.instance[k]
+            m = (tb >= t0) & (tb < t1) & (qb > q0) & (qb < q1) & (zb > z0) & (zb < z1)
+            m &= np.isin(cls[near], _TAKE[int(cells.take[k])])
+            cls[near[m]] = _ARCH
+            inst[near[m]] = cells.instance[k]
     return cls, inst
