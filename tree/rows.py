@@ -389,7 +389,7 @@ def _lines(bays: list[_Bay]) -> list[tuple[list[_Bay], _Line | _Arc]]:
             bent.append(row)  # a curved arcade, or bays on no one line
             continue
         lines.append(([b for b, k in zip(row, near, strict=True) if k], _Line(o, u)))
-    arcs: list[tuple[list[_Bay], _Line | _Arc]] = []
+    arcs: list[tuple[list[_Bay], _Arc]] = []
     taken: set[int] = set()
     seeds = sorted(bent, key=len, reverse=True)
     while seeds:
@@ -402,8 +402,8 @@ def _lines(bays: list[_Bay]) -> list[tuple[list[_Bay], _Line | _Arc]]:
         arcs.append(grown)
         taken |= {b.id for b in grown[0]}
         # the storeys of a curved facade share its circle: bays on it at other bases seed rows
-        arc = grown[1]
-        on = sorted(_on_arc([b for b in bays if b.id not in taken], arc.c, arc.r, None), key=lambda b: b.zmin)
+        circle = grown[1]
+        on = sorted(_on_arc([b for b in bays if b.id not in taken], circle.c, circle.r, None), key=lambda b: b.zmin)
         level: list[_Bay] = []
         for b in [*on, None]:
             if b is not None and (not level or b.zmin - level[0].zmin <= ROW_BASE):
@@ -413,13 +413,13 @@ def _lines(bays: list[_Bay]) -> list[tuple[list[_Bay], _Line | _Arc]]:
                 seeds.insert(0, level)
             level = [b] if b is not None else []
     out = [(row, line) for row, line in lines
-           if not any(2 * len({b.id for b in row} & {b.id for b in arc}) >= len(row) and len(arc) > len(row)
-                      for arc, _ in arcs)]
+           if not any(2 * len({b.id for b in row} & {b.id for b in curve}) >= len(row) and len(curve) > len(row)
+                      for curve, _ in arcs)]
     used = {b.id for row, _ in out for b in row}
-    for arc, line in arcs:
-        arc = [b for b in arc if b.id not in used]
-        if len(arc) >= ROW_MIN_BAYS:
-            out.append((arc, line))
+    for curve, circle in arcs:
+        kept = [b for b in curve if b.id not in used]
+        if len(kept) >= ROW_MIN_BAYS:
+            out.append((kept, circle))
     return out
 
 
@@ -550,8 +550,8 @@ def arcade_cells(samples: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]], nex
             cid = bid
             if bid == 0:
                 # a gap that holds a whole bay of its own (one the row left out) is no new bay
-                if any(_wpct(line.tq(g.pts[:, :2])[0], g.w, 99) - _wpct(line.tq(g.pts[:, :2])[0], g.w, 1)
-                       >= FULL_SHARE * pitch for g in grabbed):
+                if any(_wpct(t_g, g.w, 99) - _wpct(t_g, g.w, 1) >= FULL_SHARE * pitch
+                       for g in grabbed for t_g in (line.tq(g.pts[:, :2])[0],)):
                     continue
                 cid = next_id
                 next_id += 1
