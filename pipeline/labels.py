@@ -54,7 +54,7 @@ from hollowtree.tiling.grid import TileGrid
 from hollowtree.tiling.ingest_plan import part_counts
 from hollowtree.tiling.stage import Stage, params_hash
 from hollowtree.tiling.store import CHUNK_POINTS, RunStore
-from hollowtree.tree.rows import ArcadeCells, apply_cells
+from hollowtree.tree.rows import ArcadeCells, apply_cells, cell_corners
 
 __all__ = ["LABEL_DTYPES", "RANGE_ROWS", "PART_ROWS", "LEAF_BITS", "run_labels", "labels_tile", "labels_range",
            "part_rows", "plan_slices", "tile_parts", "LabelsReport"]
@@ -120,15 +120,11 @@ def _arcade_cells(store: RunStore, tile: int) -> ArcadeCells:
     grid = TileGrid.from_dict(store.attrs["grid"])
     off = np.asarray(store.attrs["coords"]["offset"], dtype=np.float64)
     x0, y0, x1, y1 = grid.buffered_bounds(tile)
-    keep = np.zeros(len(cells), bool)
-    for k in range(len(cells)):
-        ox, oy, ux, uy = cells.frame[k]
-        t0, t1, q0, q1 = cells.box[k, :4]
-        if cells.trim[k]:  # a cut bay's points beyond its cell can lie anywhere along the line
-            t0, t1 = t0 - 1e3, t1 + 1e3
-        corners = np.array([[ox + t * ux - q * uy, oy + t * uy + q * ux] for t in (t0, t1) for q in (q0, q1)]) + off[:2]
-        keep[k] = (corners[:, 0].max() >= x0 and corners[:, 0].min() <= x1 and corners[:, 1].max() >= y0
-                   and corners[:, 1].min() <= y1)
+    box = cells.box[:, :4].copy()
+    box[cells.trim, :2] += (-1e3, 1e3)  # a cut bay's points beyond its cell can lie anywhere along the line
+    x, y = cell_corners(cells.frame, box)
+    x, y = x + off[0], y + off[1]
+    keep = (x.max(axis=1) >= x0) & (x.min(axis=1) <= x1) & (y.max(axis=1) >= y0) & (y.min(axis=1) <= y1)
     return ArcadeCells(cells.frame[keep], cells.box[keep], cells.instance[keep], cells.take[keep], cells.trim[keep])
 
 

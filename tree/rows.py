@@ -71,7 +71,7 @@ import numpy.typing as npt
 
 from hollowtree.classes import ClassId
 
-__all__ = ["ROW_TAKE", "PIECE_TAKE", "FULL_TAKE", "ArcadeCells", "arcade_cells", "apply_cells", "instance_sample", "SAMPLE_POINTS"]
+__all__ = ["ROW_TAKE", "PIECE_TAKE", "FULL_TAKE", "ArcadeCells", "arcade_cells", "apply_cells", "cell_corners", "instance_sample", "SAMPLE_POINTS"]
 
 #: Points sampled from each arch and dome instance for the row analysis (seeded).
 SAMPLE_POINTS = 4096
@@ -581,6 +581,21 @@ def arcade_cells(samples: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]], nex
                         np.array(trims)), absorbed)
 
 
+def cell_corners(frame: npt.ArrayLike, box: npt.ArrayLike) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """The x and y (store coordinates), each ``(m, 4)``, of the corners of cells with
+    frames ``frame`` ``(m, 4)`` and boxes ``t0, t1, q0, q1`` ``(m, 4)`` (:class:`ArcadeCells`).
+
+    >>> x, y = cell_corners([[1.0, 2.0, 0.0, 1.0]], [[0.0, 3.0, -1.0, 1.0]])
+    >>> x.tolist(), y.tolist()
+    ([[2.0, 0.0, 2.0, 0.0]], [[2.0, 2.0, 5.0, 5.0]])
+    """
+    f = np.asarray(frame, dtype=np.float64).reshape(-1, 4)
+    b = np.asarray(box, dtype=np.float64).reshape(-1, 4)
+    t, q = b[:, [0, 0, 1, 1]], b[:, [2, 3, 2, 3]]
+    ox, oy, ux, uy = (f[:, j:j + 1] for j in range(4))
+    return ox + t * ux - q * uy, oy + t * uy + q * ux
+
+
 def apply_cells(xyz: npt.ArrayLike, class_id: npt.ArrayLike, instance: npt.ArrayLike, cells: ArcadeCells
                 ) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint32]]:
     """Class and instance of points (store coordinates) after the cells: a `take` cell's
@@ -620,9 +635,7 @@ def apply_cells(xyz: npt.ArrayLike, class_id: npt.ArrayLike, instance: npt.Array
         if not len(ks):
             continue
         box = cells.box[ks]
-        t_c = np.concatenate([box[:, 0], box[:, 0], box[:, 1], box[:, 1]])
-        q_c = np.concatenate([box[:, 2], box[:, 3], box[:, 2], box[:, 3]])
-        cx, cy = ox + t_c * ux - q_c * uy, oy + t_c * uy + q_c * ux
+        cx, cy = cell_corners(cells.frame[ks], box[:, :4])
         lo = int(np.searchsorted(xs, cx.min() - 1e-6, side="left"))
         hi = int(np.searchsorted(xs, cx.max() + 1e-6, side="right"))
         near = order[lo:hi]
