@@ -64,9 +64,8 @@ VAL_SEEDS = {
     "shape-check": "`tree-v37`: the element check with its points' shape",
     "oof-dm": "`tree-v39`: the dome and minaret thresholds chosen on training seeds",
     "tree-v40": "`tree-v40`: the look-ahead from any node (`gen-v4`)",
-    "support-spacing": "rejected: RANSAC's minimum support follows the scan's spacing (`coarse.support_spacing`)",
-    "split-p30": "rejected: the split model refitted with procedural training sites 0-29 (seeds 0-1)",
     "tree-v42": "`tree-v42`: arcade rows along circles, cells that partition a row (default)",
+    "tree-v44": "rejected: a row's left-out bays, twins and bays beside a gap (`tree-v44`)",
 }
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
 BEGIN = re.compile(r"<!-- generated: ([\w.-]+) -->\n")

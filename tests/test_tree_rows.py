@@ -1,6 +1,6 @@
-"""Arcade rows after the tree (tree/rows.py): pieces take their piers, gaps get bays (or
-the bay the row left out), end bays and bays beside a gap lose what reaches beyond a pitch,
-pieces inside a bay and twin bays join it, straight or curved; short rows change nothing."""
+"""Arcade rows after the tree (tree/rows.py): pieces take their piers, gaps get bays, end
+bays lose their end wall, pieces inside a bay join it, straight or curved; short rows
+change nothing."""
 
 from __future__ import annotations
 
@@ -111,51 +111,6 @@ def test_a_bay_that_is_one_face_takes_the_rest_of_its_bay():
     c, i = apply_cells(xyz, [WALL, WALL, WALL, int(ClassId.OTHER)], [50, 50, 50, 0], cells)
     assert c.tolist() == [ARCH, ARCH, ARCH, ARCH]
     assert i.tolist() == [3, 3, 2, 3]
-
-
-def test_a_bay_the_row_left_out_gets_its_gap():
-    """A gap of one bay that holds an arch instance a bay wide but left out of the row (its
-    base 0.6 m above the row's: the upper part of its bay) is that instance's cell, no new
-    bay; a small piece in the gap joins it."""
-    rng = np.random.default_rng(6)
-    row = {i + 1: _box(rng, i * PITCH, (i + 1) * PITCH) for i in range(7) if i != 3}
-    row[30] = np.column_stack([rng.uniform(3 * PITCH, 4 * PITCH, 300), rng.uniform(-0.5, 0.5, 300),
-                               rng.uniform(0.6, 5.0, 300)])
-    row[31] = _box(rng, 3 * PITCH + 1.0, 3 * PITCH + 1.5, n=100)
-    cells, absorbed = arcade_cells(_samples(row), 100)
-    assert absorbed == {31: 30}
-    assert 100 not in cells.instance.tolist()
-    k, (t0, t1) = _cell(cells, 30)
-    assert cells.take[k] == 2
-    assert (t0, t1) == (pytest.approx(3 * PITCH, abs=0.1), pytest.approx(4 * PITCH, abs=0.1))
-
-
-def test_a_bay_beside_a_gap_is_cut_from_the_gap():
-    """A bay 1.3 pitches wide, reaching into the empty slot beside it, is cut to one pitch
-    from its neighbour's side; the gap's new bay gets the whole slot."""
-    rng = np.random.default_rng(8)
-    row = {i + 1: _box(rng, i * PITCH, (i + 1) * PITCH) for i in range(8) if i not in (3, 4)}
-    row[5] = _box(rng, 3.7 * PITCH, 5 * PITCH, n=780)
-    cells, absorbed = arcade_cells(_samples(row), 100)
-    assert absorbed == {}
-    k, (t0, t1) = _cell(cells, 5)
-    assert cells.trim[k]
-    assert (t0, t1) == (pytest.approx(4 * PITCH, abs=0.1), pytest.approx(5 * PITCH, abs=0.1))
-    k, (t0, t1) = _cell(cells, 100)
-    assert (t0, t1) == (pytest.approx(3 * PITCH, abs=0.1), pytest.approx(4 * PITCH, abs=0.1))
-
-
-def test_twin_bays_are_one():
-    """Two full bays whose mid-points are under half a pitch apart are one: the one with
-    fewer points joins the other and has no cell."""
-    rng = np.random.default_rng(7)
-    row = {i + 1: _box(rng, i * PITCH, (i + 1) * PITCH) for i in range(6)}
-    row[13] = _box(rng, 2 * PITCH + 0.4, 3 * PITCH + 0.4, n=200)
-    cells, absorbed = arcade_cells(_samples(row), 100)
-    assert absorbed == {13: 3}
-    assert 13 not in cells.instance.tolist()
-    k, (t0, t1) = _cell(cells, 3)
-    assert (t0, t1) == (pytest.approx(2 * PITCH, abs=0.25), pytest.approx(3 * PITCH, abs=0.25))
 
 
 def test_the_row_may_run_any_way():

@@ -32,9 +32,7 @@ the merge across groups (tree/merge.py):
    heights are the full bays' (medians of their 2nd/98th and 1st/99th percentiles,
    widened by ``BAND_PAD`` and ``Z_PAD``).
    Pieces of one bay are one first: a piece whose mid-point lies in a full bay is part
-   of it, two neighbouring pieces no wider together than ``PIECES`` pitches are one, and
-   of two full bays whose mid-points are under ``TWIN`` pitches apart the one with fewer
-   points is part of the other (tree-v43).
+   of it, and two neighbouring pieces no wider together than ``PIECES`` pitches are one.
 3. **What changes.** The cells partition the row's band (tree-v42):
    - A piece's cell takes the points of the wall, other, pillar, dome and arch classes
      inside it (``PIECE_TAKE``; `take` 2): its pier faces and the band of wall above it,
@@ -46,12 +44,10 @@ the merge across groups (tree/merge.py):
      wall below its top, and HollowNet calls some pieces of bays dome.
    - A gap between two bays of ``k`` pitches (within ``GAP_TOLERANCE``) holds ``k - 1``
      bays: each gets a new instance with a cell of equal share of the gap, unless an arch
-     instance a full bay wide already lies in it: a bay the row left out, whose cell it is
-     then (tree-v43).
-   - The first or last bay, or one between a neighbour and such a gap (tree-v44), wider
-     than ``WIDE`` pitches (up to ``WIDE_MAX``, and no taller than the row) is cut to one
-     pitch from its neighbour's side (`trim`): its points beyond the cell go back to the
-     wall (class wall, no instance), and the gap's cells start at the cut.
+     instance a full bay wide already lies in it (a bay the row left out).
+   - The first or last bay wider than ``WIDE`` pitches (up to ``WIDE_MAX``, and no taller
+     than the row) is cut to one pitch from its inner edge (`trim`): its points beyond the cell go back to the wall (class wall, no
+     instance).
    - A dome instance with at least ``ABSORB`` of its points inside a row's cells is no
      instance (HollowNet calls some pieces of bays dome): its points inside the cells join
      their bays like every dome point there, the rest keep class dome with instance 0 (a
@@ -109,13 +105,10 @@ FULL_SHARE = 0.85
 DEEP_SHARE = 0.5
 #: Two neighbouring pieces (bays not full) no wider together than this many pitches are one bay.
 PIECES = 1.0
-#: Two full bays whose mid-points are less than this many pitches apart are one bay.
-TWIN = 0.5
 #: Two bays are neighbours when their mid-points are at most this many pitches apart.
 NEIGHBOUR = 1.3
-#: An end bay, or a bay beside a gap, wider than ``WIDE`` pitches (and not wider than
-#: ``WIDE_MAX``, nor taller than the row's top by ``TALL`` m: a portal is no bay with its end
-#: wall) is cut to one pitch.
+#: An end bay wider than ``WIDE`` pitches (and not wider than ``WIDE_MAX``, nor taller than
+#: the row's top by ``TALL`` m: a portal is no bay with its end wall) is cut to one pitch.
 WIDE = 1.25
 WIDE_MAX = 1.6
 TALL = 0.5
@@ -509,18 +502,6 @@ def arcade_cells(samples: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]], nex
         mids = np.array([(lo + hi) / 2 for lo, hi, _, _ in ext])
         widths = np.array([hi - lo for lo, hi, _, _ in ext])
         full = (widths >= FULL_SHARE * pitch) & (np.array([q1 - q0 for _, _, q0, q1 in ext]) >= deep)
-        # Twins: two full bays whose mid-points are less than ``TWIN`` pitches apart are one
-        # bay, the one with more points (a piece of a bay as wide as a bay, inside another).
-        keep = [True] * len(row)
-        for k in range(len(row) - 1):
-            j = k + 1
-            if full[k] and full[j] and keep[k] and mids[j] - mids[k] < TWIN * pitch:
-                light, heavy = (k, j) if row[k].w.sum() < row[j].w.sum() else (j, k)
-                absorbed[row[light].id] = row[heavy].id
-                keep[light] = False
-        row = [b for b, k in zip(row, keep, strict=True) if k]
-        ext = [e for e, k in zip(ext, keep, strict=True) if k]
-        mids, widths, full = mids[keep], widths[keep], full[keep]
         fb = [k for k in range(len(row)) if full[k]]
         q0 = float(np.median([ext[k][2] for k in fb])) - BAND_PAD
         q1 = float(np.median([ext[k][3] for k in fb])) + BAND_PAD
@@ -528,40 +509,31 @@ def arcade_cells(samples: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]], nex
         z1 = float(np.median([row[k].zmax for k in fb])) + Z_PAD[1]
         cells: list[tuple[int, float, float, int, bool]] = []  # id (0 = new), t0, t1, take, trim
         last = len(row) - 1
-        # bays in the gap after each bay: k - 1 for a gap of k pitches (within GAP_TOLERANCE)
-        steps = np.diff(mids) / pitch
-        gaps = [int(round(m)) - 1 if round(m) >= 2 and abs(m - round(m)) <= GAP_TOLERANCE else 0
-                for m in steps.tolist()] + [0]
         for k, b in enumerate(row):
             lo, hi = ext[k][0], ext[k][1]
             left, right = lo, hi
-            has_left = k > 0 and mids[k] - mids[k - 1] <= NEIGHBOUR * pitch
-            has_right = k < last and mids[k + 1] - mids[k] <= NEIGHBOUR * pitch
-            if has_left:
+            if k > 0 and mids[k] - mids[k - 1] <= NEIGHBOUR * pitch:
                 p_hi = ext[k - 1][1]
                 left = p_hi if full[k - 1] and not full[k] else (lo if full[k] and not full[k - 1] else (p_hi + lo) / 2)
-            if has_right:
+            if k < last and mids[k + 1] - mids[k] <= NEIGHBOUR * pitch:
                 n_lo = ext[k + 1][0]
                 right = n_lo if full[k + 1] and not full[k] else (hi if full[k] and not full[k + 1] else (hi + n_lo) / 2)
-            # an end bay is cut from the row's end; a bay between a neighbour and a gap of
-            # whole pitches, from the gap's side (tree-v44)
-            cut_left = k == 0 or (bool(gaps[k - 1]) and has_right)
-            cut_right = not cut_left and (k == last or (bool(gaps[k]) and has_left))
             trim = False
-            if (WIDE * pitch < right - left <= WIDE_MAX * pitch and (cut_left or cut_right)
+            if (WIDE * pitch < right - left <= WIDE_MAX * pitch and (k == 0 or k == last)
                     and b.zmax <= z1 + TALL):
-                if cut_left:
+                if k == 0:
                     left = right - pitch
                 else:
                     right = left + pitch
                 trim = True
             cells.append((b.id, left, right, 3 if full[k] else 2, trim))
-        edges = [(t0, t1) for _, t0, t1, _, _ in cells]
         for k in range(len(row) - 1):
-            if gaps[k]:
-                a, z = edges[k][1], edges[k + 1][0]
-                w = (z - a) / gaps[k]
-                cells += [(0, a + j * w, a + (j + 1) * w, 2, False) for j in range(gaps[k])]
+            m = (mids[k + 1] - mids[k]) / pitch
+            km = int(round(m))
+            if km >= 2 and abs(m - km) <= GAP_TOLERANCE:
+                a, z = ext[k][1], ext[k + 1][0]
+                w = (z - a) / (km - 1)
+                cells += [(0, a + j * w, a + (j + 1) * w, 2, False) for j in range(km - 1)]
         members = {b.id for b in row}
         row_cells: list[tuple[int, float, float]] = []
         for bid, t0, t1, take, trim in cells:
@@ -577,19 +549,14 @@ def arcade_cells(samples: Mapping[int, tuple[npt.ArrayLike, npt.ArrayLike]], nex
                     grabbed.append(b)
             cid = bid
             if bid == 0:
-                # a gap that holds a whole bay of its own (one the row left out) is that bay's
-                # cell: its points a bay beside it holds join it (tree-v43); no new bay
-                whole = [g for g in grabbed
-                         if _wpct(t_g := line.tq(g.pts[:, :2])[0], g.w, 99) - _wpct(t_g, g.w, 1) >= FULL_SHARE * pitch]
-                if whole:
-                    cid = max(whole, key=lambda g: float(g.w.sum())).id
-                    members.add(cid)
-                else:
-                    cid = next_id
-                    next_id += 1
+                # a gap that holds a whole bay of its own (one the row left out) is no new bay
+                if any(_wpct(t_g, g.w, 99) - _wpct(t_g, g.w, 1) >= FULL_SHARE * pitch
+                       for g in grabbed for t_g in (line.tq(g.pts[:, :2])[0],)):
+                    continue
+                cid = next_id
+                next_id += 1
             for g in grabbed:
-                if g.id != cid:
-                    absorbed[g.id] = cid
+                absorbed[g.id] = cid
             row_cells.append((cid, t0, t1))
             if take or trim:
                 frame, shift = line.frame(t0, t1)
