@@ -10,11 +10,12 @@ install: $(STAMP)
 
 # torch comes first and pinned: on our machines torch==2.13.0 is a CPU build on local disk,
 # while a plain `torch` (or any range that admits a newer release) pulls a multi-GB CUDA build.
-$(STAMP): pyproject.toml
+# The rest at the versions of constraints.txt, the same on every machine (labels move with them).
+$(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet "torch==2.13.0"
-	$(PY) -m pip install --quiet -e ".[dev]"
+	$(PY) -m pip install --quiet -e ".[dev]" -c constraints.txt
 	# best effort: Debian's chromium for the browser tests of `hollowtree view` (they skip without it)
 	-command -v chromium >/dev/null 2>&1 || { [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1 && \
 		{ DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium || { apt-get update -qq && \

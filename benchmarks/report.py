@@ -30,6 +30,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO / "benchmarks") not in sys.path:
     sys.path.insert(0, str(REPO / "benchmarks"))
 
+from choose import f1 as _f1  # noqa: E402
 from results_md import spread_table, table1  # noqa: E402
 
 RESULTS = REPO / "benchmarks" / "results"
@@ -61,11 +62,11 @@ LATEST = {
 #: docs/generalize.md): the name part of their JSONs (``generalize-val-4m-<name>.json`` is
 #: seed 0, ``...-<name>-seed1.json`` seed 1, ...), in the order they were run.
 VAL_SEEDS = {
-    "shape-check": "`tree-v37`: the element check with its points' shape",
     "oof-dm": "`tree-v39`: the dome and minaret thresholds chosen on training seeds",
     "tree-v40": "`tree-v40`: the look-ahead from any node (`gen-v4`)",
     "tree-v42": "`tree-v42`: arcade rows along circles, cells that partition a row (default)",
     "tree-v44": "rejected: a row's left-out bays, twins and bays beside a gap (`tree-v44`)",
+    "rerun-v42": "`tree-v42` again, a fresh install at the versions of `constraints.txt` (`choose.py`)",
 }
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
 BEGIN = re.compile(r"<!-- generated: ([\w.-]+) -->\n")
@@ -430,13 +431,6 @@ def five_sites() -> str:
 
 
 # --- docs/decisions/method.md ------------------------------------------------------------
-
-def _f1(*runs: dict) -> float:
-    """F1 over the element classes of one run, or of several runs' sites together."""
-    fd, gt, m, p = (sum(x) for x in zip(*(_found(d["totals"]["tree"]) for d in runs), strict=True))
-    r, pr = fd / gt, m / p
-    return 2 * r * pr / (r + pr)
-
 
 def _three_rows(name: str) -> tuple[float, float, float, float | None] | None:
     """F1 of one run's three validation rows (0.5-2 M, 4 M, 10 M on sites 100 000-100 006),

@@ -485,17 +485,32 @@ def _algorithms() -> dict[str, str]:
     return {"tree_algorithm": TREE_ALGORITHM, "coarse_algorithm": COARSE_ALGORITHM, "grid_algorithm": GRID_ALGORITHM}
 
 
+#: The packages whose versions can move labels at the margin (numeric kernels, HollowNet,
+#: the ray caster of the synthetic scans): :func:`machine` names them.
+NUMERIC_PACKAGES = ("numpy", "scipy", "numba", "llvmlite", "torch", "scikit-learn", "embreex")
+
+
 def machine() -> dict[str, Any]:
-    """The machine a result was measured on: cores, platform and CPU model. Labels can
-    differ at the margin between CPU types (the numeric kernels of BLAS differ), so
-    variants are compared on one machine."""
+    """The machine a result was measured on: cores, platform, CPU model and the versions of
+    :data:`NUMERIC_PACKAGES`. Labels can differ at the margin between CPU types and between
+    package versions (the numeric kernels differ), so variants are compared in one
+    environment (``benchmarks/choose.py``)."""
+    from importlib.metadata import PackageNotFoundError, version
+
     cpu = platform.processor()
     try:
         cpu = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
                     if line.startswith("model name")), cpu)
     except OSError:
         pass
-    return {"cpus": os.cpu_count(), "platform": platform.platform(), "cpu": cpu or platform.machine()}
+    packages = {}
+    for name in NUMERIC_PACKAGES:
+        try:
+            packages[name] = version(name)
+        except PackageNotFoundError:
+            packages[name] = None
+    return {"cpus": os.cpu_count(), "platform": platform.platform(), "cpu": cpu or platform.machine(),
+            "packages": packages}
 
 
 def _is_store(text: str) -> bool:

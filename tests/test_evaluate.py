@@ -206,6 +206,7 @@ def test_evaluate_synthetic_scene_end_to_end(evaluated):
     assert site["n_points"] > 30_000
     assert out["machine"]["cpus"] >= 1
     assert out["machine"]["cpu"]  # labels can differ at the margin between CPU types
+    assert out["machine"]["packages"]["numpy"] == np.__version__  # ... and between package versions
     assert list(site["methods"]) == ["ransac", "ransac+dbscan", "tree"]
     assert 0 < site["n_primitives"] <= site["n_segments"]
     for m in site["methods"].values():

@@ -1,0 +1,179 @@
+"""The selection rule of docs/generalize.md as one command: run a variant's validation rows
+on tree seeds 0, 1 and 2 and judge it against the default's.
+
+A *variant* is the code in the working tree plus ``--set`` overrides, under a name. For each
+tree seed and each row of :data:`ROWS` the script runs ``bench_generalize.py`` (``--no-energy``,
+``--set tree.seed=K``) and writes ``benchmarks/results/generalize-<row>-<name>[-seedK].json``
+(seed 0 has no suffix), the files ``report.py`` reads. A row whose file exists is read, not
+rerun, so an interrupted run picks up where it stopped; ``--force`` reruns. The scans and
+their stores live in ``--work`` (one folder per row): the coarse stage of every variant after
+the first resumes from them, only the tree reruns.
+
+Then it prints, for the variant and ``--against`` (the default's name), each seed's F1 per
+row and the three-row sum (0.5-2 M + 4 M + 10 M on 14 sites), the mean over the seeds and
+the verdict: *keep* when the variant's mean is at least :data:`BAR` above the default's and
+the dome batch's element F1 per class at seed 0 did not fall. Both must have run in one
+environment, the same CPU model and numeric packages (labels move with either; the JSON's
+``machine``): the script says so when they did not.
+
+Run: ``python benchmarks/choose.py NAME [--set KEY=VALUE ...] [--seeds 0 1 2] [--rows ...]
+[--against rerun-v42]``; ``--judge`` only reads the JSONs. A row's full run on 2 cores: about
+4 (0.5-2 M), 7 (4 M) and 2 x 8 (10 M) minutes, the dome batch 5; the first run of a row also
+scans its sites and runs their coarse stage. Validation seeds only: the test split is never
+used to choose (docs/generalize.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+for p in (REPO, REPO / "benchmarks"):
+    if str(p) not in sys.path:
+        sys.path.insert(0, str(p))
+
+RESULTS = REPO / "benchmarks" / "results"
+
+#: Each validation row: its name in the JSON files and ``bench_generalize.py``'s arguments.
+ROWS: dict[str, list[str]] = {
+    "val": ["--sites", "14", "--points", "5e5", "2e6"],
+    "val-4m": ["--sites", "14", "--points", "4e6", "4e6"],
+    "val-density-10m": ["--sites", "7", "--points", "1e7", "1e7"],
+    "val-10m-b": ["--skip", "7", "--sites", "7", "--points", "1e7", "1e7"],
+    # the dome batch: the next 6 validation seeds of each family with domes (seed 0 only)
+    "val-domes": ["--family", "courtyard_mosque", "linear_facade", "pavilion_garden", "monument", "--skip", "4",
+                  "--sites", "6", "--points", "5e5", "2e6"],
+}
+#: The rows of the sum; the 10 M row is its two halves' sites together.
+SUM_ROWS = ("val", "val-4m", "val-density-10m", "val-10m-b")
+#: How much the mean three-row sum must rise for a variant to be kept.
+BAR = 0.02
+ELEMENTS = ("arch", "dome", "minaret", "pillar")
+
+
+def result_path(row: str, name: str, seed: int) -> Path:
+    """The JSON of one row of a variant at one tree seed (seed 0: no suffix)."""
+    return RESULTS / f"generalize-{row}-{name}{'' if seed == 0 else f'-seed{seed}'}.json"
+
+
+def f1(*runs: dict) -> float:
+    """Element F1 (all four classes) of one run, or of several runs' sites together."""
+    tot = [sum(d["totals"]["tree"][c][k] for d in runs for c in ELEMENTS) for k in ("found", "gt", "matched", "pred")]
+    found, gt, matched, pred = tot
+    r, p = found / max(gt, 1), matched / max(pred, 1)
+    return 2 * r * p / (r + p) if r + p else 0.0
+
+
+def class_f1(run: dict, c: str) -> float:
+    """One class's F1 in one run."""
+    t = run["totals"]["tree"][c]
+    return 2 * t["found"] / max(t["gt"] + t["pred"], 1)
+
+
+def three_rows(name: str, seed: int) -> tuple[float, float, float] | None:
+    """F1 of the 0.5-2 M, 4 M and 10 M (14 sites) rows, or None where one is missing."""
+    files = [result_path(r, name, seed) for r in SUM_ROWS]
+    if not all(f.is_file() for f in files):
+        return None
+    a, b, c, d = (json.loads(f.read_text()) for f in files)
+    return f1(a), f1(b), f1(c, d)
+
+
+def environment(run: dict) -> str:
+    """A run's CPU model and numeric packages (``machine`` of its JSON), as one line."""
+    m = run.get("machine", {})
+    pk = m.get("packages")
+    return m.get("cpu", "unknown CPU") + (", " + ", ".join(f"{k} {v}" for k, v in sorted(pk.items()))
+                                          if pk else ", packages not recorded")
+
+
+def environments(name: str, seeds: list[int]) -> set[str]:
+    """The environments (:func:`environment`) a variant's JSONs were made in."""
+    out = set()
+    for s in seeds:
+        for r in ROWS:
+            f = result_path(r, name, s)
+            if f.is_file():
+                out.add(environment(json.loads(f.read_text())))
+    return out
+
+
+def judge(name: str, against: str, seeds: list[int]) -> tuple[str, list[str]]:
+    """The verdict on ``name`` against ``against`` and the lines of its table."""
+    lines = [f"{'variant':<28}" + "".join(f"{'seed ' + str(s):>24}" for s in seeds) + f"{'mean':>8}{'range':>8}",
+             f"{'':<28}" + "".join(f"{'0.5-2M / 4M / 10M = sum':>24}" for _ in seeds)]
+    means = {}
+    for n in (against, name):
+        rows = [three_rows(n, s) for s in seeds]
+        cells = [f"{r[0]:.3f}/{r[1]:.3f}/{r[2]:.3f}={sum(r):.3f}" if r else "(not run)" for r in rows]
+        done = [sum(r) for r in rows if r]
+        means[n] = sum(done) / len(done) if len(done) == len(seeds) else None
+        lines.append(f"{n:<28}" + "".join(f"{c:>24}" for c in cells)
+                     + (f"{means[n]:>8.3f}{max(done) - min(done):>8.3f}" if means[n] is not None else f"{'-':>8}"))
+    dome = [result_path("val-domes", n, 0) for n in (against, name)]
+    fallen = []
+    if all(f.is_file() for f in dome):
+        a, b = (json.loads(f.read_text()) for f in dome)
+        lines.append("dome batch, seed 0, F1 per class: " + ", ".join(
+            f"{c} {class_f1(a, c):.3f} -> {class_f1(b, c):.3f}" for c in ELEMENTS))
+        fallen = [c for c in ELEMENTS if class_f1(b, c) < class_f1(a, c)]
+    envs = environments(name, seeds) | environments(against, seeds)
+    if len(envs) > 1:
+        lines.append("the runs were made in different environments (labels move with the CPU model and the "
+                     "numeric packages): rerun the default here under another name and judge against that:")
+        lines += [f"  {e}" for e in sorted(envs)]
+    if means[name] is None or means[against] is None:
+        return "not judged: a row is missing", lines
+    gain = means[name] - means[against]
+    if not all(f.is_file() for f in dome):
+        return f"not judged: the dome batch is missing (mean {gain:+.3f})", lines
+    if gain >= BAR and not fallen:
+        return f"keep: mean {gain:+.3f} (bar +{BAR})", lines
+    why = [f"mean {gain:+.3f}, the bar is +{BAR}"] + [f"the dome batch's {c} F1 fell" for c in fallen]
+    return "reject: " + "; ".join(why), lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("name", help="the variant's name in the JSON files (e.g. tree-v45)")
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                    help="a workflow override of the variant, repeatable")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], metavar="K", help="tree seeds (default 0 1 2)")
+    ap.add_argument("--rows", nargs="+", choices=list(ROWS), default=list(ROWS), metavar="ROW",
+                    help=f"rows to run (default all: {', '.join(ROWS)}; the dome batch runs at seed 0 only)")
+    ap.add_argument("--against", default="rerun-v42", metavar="NAME",
+                    help="the default's run in this environment (default rerun-v42: tree-v42, constraints.txt)")
+    ap.add_argument("--work", type=Path, default=REPO / "out" / "choose", help="scans and stores, one folder per row")
+    ap.add_argument("--force", action="store_true", help="rerun rows whose JSON exists")
+    ap.add_argument("--judge", action="store_true", help="run nothing; judge the JSONs there are")
+    args = ap.parse_args(argv)
+    if any(s < 0 for s in args.seeds):
+        ap.error("--seeds must be 0 or more")
+    bad = [o for o in args.overrides if "=" not in o or o.split("=", 1)[0].strip() == "tree.seed"]
+    if bad:
+        ap.error(f"--set {bad[0]!r}: give KEY=VALUE (tree.seed is the script's)")
+    if not args.judge:
+        import bench_generalize
+
+        for seed in args.seeds:
+            for row in args.rows:
+                out = result_path(row, args.name, seed)
+                if (row == "val-domes" and seed != 0) or (out.is_file() and not args.force):
+                    continue
+                print(f"== {args.name}, tree seed {seed}, row {row}", flush=True)
+                argv_row = ["--split", "val", *ROWS[row], "--no-energy", "--work", str(args.work / row),
+                            "--json", str(out), "--set", f"tree.seed={seed}"]
+                for o in args.overrides:
+                    argv_row += ["--set", o]
+                bench_generalize.main(argv_row)
+    verdict, lines = judge(args.name, args.against, args.seeds)
+    print("\n".join(lines))
+    print(verdict)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,86 @@
+"""``benchmarks/choose.py``: the selection rule of docs/generalize.md on a variant's JSONs."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+_spec = importlib.util.spec_from_file_location("hollowtree_choose", REPO / "benchmarks" / "choose.py")
+choose = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(choose)
+
+
+def _run(found: int, gt: int = 100, pred: int = 100, cpu: str = "CPU A", dome: int = 10) -> dict:
+    """A bench_generalize JSON: ``found`` of ``gt`` arches (all predictions that match one
+    are right) and ``dome`` of 20 domes."""
+    t = {c: {"gt": 0, "found": 0, "pred": 0, "matched": 0} for c in choose.ELEMENTS}
+    t["arch"] = {"gt": gt, "found": found, "pred": pred, "matched": found}
+    t["dome"] = {"gt": 20, "found": dome, "pred": dome, "matched": dome}
+    return {"totals": {"tree": t}, "machine": {"cpu": cpu, "packages": {"numpy": "2.4.6"}}}
+
+
+@pytest.fixture
+def results(tmp_path, monkeypatch):
+    monkeypatch.setattr(choose, "RESULTS", tmp_path)
+
+    def put(name: str, seed: int, found: int, **kw) -> None:
+        for row in choose.ROWS:
+            if row != "val-domes" or seed == 0:
+                choose.result_path(row, name, seed).write_text(json.dumps(_run(found, **kw)))
+
+    return put
+
+
+def test_f1_of_several_runs_pools_their_sites():
+    a, b = _run(50), _run(100)
+    r, p = 60 / 120, 60 / 110  # 50 + 10 found of 100 + 20, of 100 + 10 predicted
+    assert choose.f1(a) == pytest.approx(2 * r * p / (r + p))
+    r, p = 170 / 240, 170 / 220  # both: 150 + 20 found of 200 + 40, of 200 + 20 predicted
+    assert choose.f1(a, b) == pytest.approx(2 * r * p / (r + p))
+    assert 0 < choose.f1(a) < choose.f1(a, b) < choose.f1(b) <= 1
+
+
+def test_seed_zero_has_no_suffix(tmp_path, monkeypatch):
+    monkeypatch.setattr(choose, "RESULTS", tmp_path)
+    assert choose.result_path("val-4m", "v9", 0).name == "generalize-val-4m-v9.json"
+    assert choose.result_path("val-4m", "v9", 2).name == "generalize-val-4m-v9-seed2.json"
+
+
+def test_a_variant_above_the_bar_is_kept_one_under_it_rejected(results):
+    for s in range(3):
+        results("base", s, 60)
+        results("better", s, 64)
+        results("same", s, 60)
+    verdict, lines = choose.judge("better", "base", [0, 1, 2])
+    assert verdict.startswith("keep"), verdict
+    assert any(line.startswith("better") for line in lines)
+    assert choose.judge("same", "base", [0, 1, 2])[0].startswith("reject: mean +0.000")
+
+
+def test_a_fall_in_the_dome_batch_rejects_whatever_the_mean(results):
+    for s in range(3):
+        results("base", s, 60)
+        results("fewer-domes", s, 70, dome=8)
+    verdict, _ = choose.judge("fewer-domes", "base", [0, 1, 2])
+    assert verdict.startswith("reject")
+    assert "dome F1 fell" in verdict
+
+
+def test_a_missing_seed_is_not_judged_and_other_environments_are_named(results):
+    results("base", 0, 60)
+    results("base", 1, 60)
+    results("half", 0, 70, cpu="CPU B")
+    verdict, lines = choose.judge("half", "base", [0, 1])
+    assert verdict == "not judged: a row is missing"
+    assert any("different environments" in line for line in lines)
+
+
+def test_the_command_line_refuses_tree_seed_as_an_override(capsys):
+    with pytest.raises(SystemExit) as e:
+        choose.main(["v9", "--set", "tree.seed=3"])
+    assert e.value.code == 2
+    assert "tree.seed" in capsys.readouterr().err
