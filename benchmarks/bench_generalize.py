@@ -156,8 +156,11 @@ def main(argv: list[str] | None = None) -> int:
                         bucket["gt_visible"] = bucket.get("gt_visible", 0) + s.n_gt_visible
                         bucket["found_visible"] = bucket.get("found_visible", 0) + s.n_found_visible
             if label == "tree":
+                scores = [r.methods[method].score(int(c)) for c in ELEMENT_CLASSES]
                 sites.append({"seed": seed, "family": f, "input": r.input, "n_points": r.n_points,
-                              "pipeline_seconds": r.pipeline_seconds})
+                              "pipeline_seconds": r.pipeline_seconds,
+                              "totals": {s.name: {"gt": s.n_gt, "found": s.n_found, "pred": s.n_pred,
+                                                  "matched": s.n_pred_matched} for s in scores}})
     print(_table(total, f"{args.split} split, {len(seeds)} sites ({', '.join(sorted({family_of(s) for s in seeds}))})"))
     # How visible the ground-truth elements are: an element of fewer points than the
     # default workflow's free_min_points (200) can only be found inside a larger segment.

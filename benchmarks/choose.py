@@ -14,7 +14,9 @@ row and the three-row sum (0.5-2 M + 4 M + 10 M on 14 sites), the mean over the 
 the verdict: *keep* when the variant's mean is at least :data:`BAR` above the default's and
 the dome batch's element F1 per class at seed 0 did not fall. Both must have run in one
 environment, the same CPU model and numeric packages (labels move with either; the JSON's
-``machine``): the script says so when they did not.
+``machine``): the script says so when they did not. Where both sides' JSONs hold per-site
+totals it also prints a paired bootstrap interval of the gain (:func:`paired_interval`):
+how far the sites alone could move it. It informs; the verdict is the rule's.
 
 Run: ``python benchmarks/choose.py NAME [--set KEY=VALUE ...] [--seeds 0 1 2] [--rows ...]
 [--against rerun-v42]``; ``--judge`` only reads the JSONs. A row's full run on 2 cores: about
@@ -82,6 +84,52 @@ def three_rows(name: str, seed: int) -> tuple[float, float, float] | None:
     return f1(a), f1(b), f1(c, d)
 
 
+def _site_counts(name: str, seeds: list[int]) -> dict[tuple[int, str], dict[int, list[int]]] | None:
+    """Per seed and sum row, each site's (found, gt, matched, pred) over the four classes,
+    keyed by the site's seed; None where a JSON is missing or records no per-site totals."""
+    out: dict[tuple[int, str], dict[int, list[int]]] = {}
+    for s in seeds:
+        for r in SUM_ROWS:
+            f = result_path(r, name, s)
+            if not f.is_file():
+                return None
+            sites = json.loads(f.read_text()).get("sites", [])
+            if not sites or any("totals" not in x for x in sites):
+                return None
+            key = (s, "val-10m" if r in ("val-density-10m", "val-10m-b") else r)
+            for x in sites:
+                t = x["totals"]
+                out.setdefault(key, {})[x["seed"]] = [sum(t[c][k] for c in ELEMENTS)
+                                                      for k in ("found", "gt", "matched", "pred")]
+    return out
+
+
+def paired_interval(name: str, against: str, seeds: list[int], *, draws: int = 2000,
+                    level: float = 0.9) -> tuple[float, float] | None:
+    """The gain of ``name``'s mean three-row sum over ``against``'s, as a ``level`` interval
+    from resampling the sites of each row (the same sites for both, at every tree seed: a
+    paired bootstrap). None where either side's JSONs lack per-site totals."""
+    import numpy as np
+
+    a, b = _site_counts(against, seeds), _site_counts(name, seeds)
+    if a is None or b is None or a.keys() != b.keys():
+        return None
+    rng = np.random.default_rng(0)
+    rows = sorted({r for _, r in a})
+    gains = np.zeros(draws)
+    for r in rows:
+        ids = sorted(set.intersection(*(set(a[(s, r)]) & set(b[(s, r)]) for s in seeds)))
+        pick = rng.integers(0, len(ids), (draws, len(ids)))
+        for side, sign in ((b, 1.0), (a, -1.0)):
+            for s in seeds:
+                c = np.asarray([side[(s, r)][i] for i in ids], dtype=np.float64)[pick].sum(axis=1)
+                rec, prec = c[:, 0] / np.maximum(c[:, 1], 1), c[:, 2] / np.maximum(c[:, 3], 1)
+                f = np.where(rec + prec > 0, 2 * rec * prec / np.maximum(rec + prec, 1e-12), 0.0)
+                gains += sign * f / len(seeds)
+    lo, hi = np.quantile(gains, [(1 - level) / 2, (1 + level) / 2])
+    return float(lo), float(hi)
+
+
 def environment(run: dict) -> str:
     """A run's CPU model and numeric packages (``machine`` of its JSON), as one line."""
     m = run.get("machine", {})
@@ -127,6 +175,9 @@ def judge(name: str, against: str, seeds: list[int]) -> tuple[str, list[str]]:
         lines += [f"  {e}" for e in sorted(envs)]
     if means[name] is None or means[against] is None:
         return "not judged: a row is missing", lines
+    ci = paired_interval(name, against, seeds)
+    lines.append("paired over the sites, 90 % of resamples put the gain in "
+                 + (f"[{ci[0]:+.3f}, {ci[1]:+.3f}]" if ci else "(not known: a side's JSONs hold no per-site totals)"))
     gain = means[name] - means[against]
     if not all(f.is_file() for f in dome):
         return f"not judged: the dome batch is missing (mean {gain:+.3f})", lines

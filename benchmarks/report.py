@@ -62,7 +62,6 @@ LATEST = {
 #: docs/generalize.md): the name part of their JSONs (``generalize-val-4m-<name>.json`` is
 #: seed 0, ``...-<name>-seed1.json`` seed 1, ...), in the order they were run.
 VAL_SEEDS = {
-    "oof-dm": "`tree-v39`: the dome and minaret thresholds chosen on training seeds",
     "tree-v40": "`tree-v40`: the look-ahead from any node (`gen-v4`)",
     "tree-v42": "`tree-v42`: arcade rows along circles, cells that partition a row (default)",
     "tree-v44": "rejected: a row's left-out bays, twins and bays beside a gap (`tree-v44`)",

@@ -84,3 +84,28 @@ def test_the_command_line_refuses_tree_seed_as_an_override(capsys):
         choose.main(["v9", "--set", "tree.seed=3"])
     assert e.value.code == 2
     assert "tree.seed" in capsys.readouterr().err
+
+
+def test_paired_interval_brackets_a_uniform_gain_and_needs_per_site_totals(tmp_path, monkeypatch):
+    monkeypatch.setattr(choose, "RESULTS", tmp_path)
+
+    def put(name: str, found: list[int], per_site: bool = True) -> None:
+        sites = []
+        for i, fd in enumerate(found):
+            t = {c: {"gt": 0, "found": 0, "pred": 0, "matched": 0} for c in choose.ELEMENTS}
+            t["arch"] = {"gt": 10, "found": fd, "pred": 10, "matched": fd}
+            sites.append({"seed": 100000 + i, **({"totals": t} if per_site else {})})
+        run = {"totals": {"tree": {c: {k: sum(x["totals"][c][k] for x in sites) if per_site else 0
+                                       for k in ("gt", "found", "pred", "matched")} for c in choose.ELEMENTS}},
+               "sites": sites}
+        for row in choose.SUM_ROWS:
+            choose.result_path(row, name, 0).write_text(json.dumps(run))
+
+    put("base", [5, 6, 7, 8, 5, 6, 7, 8])
+    put("up", [6, 7, 8, 9, 6, 7, 8, 9])  # one more arch on every site: every resample gains
+    lo, hi = choose.paired_interval("up", "base", [0], draws=200)
+    gain = sum(choose.three_rows("up", 0)) - sum(choose.three_rows("base", 0))
+    assert 0 < lo <= gain + 1e-9
+    assert gain - 1e-9 <= hi
+    put("old", [5, 6, 7, 8, 5, 6, 7, 8], per_site=False)
+    assert choose.paired_interval("up", "old", [0]) is None

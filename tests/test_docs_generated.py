@@ -48,10 +48,10 @@ def test_every_generator_is_used_and_render_is_idempotent(report):
 def test_per_class_view_of_a_validation_variant_adds_up_its_runs(report, capsys):
     import json
 
-    assert report.main(["--classes", "oof-dm"]) == 0
-    line = [x for x in capsys.readouterr().out.splitlines() if x.startswith("| oof-dm |")][0]
+    assert report.main(["--classes", "tree-v44"]) == 0
+    line = [x for x in capsys.readouterr().out.splitlines() if x.startswith("| tree-v44 |")][0]
     cells = [c.strip() for c in line.strip("|").split("|")]
-    domes = sum(json.loads((report.RESULTS / f"generalize-{row}-oof-dm{suf}.json").read_text())
+    domes = sum(json.loads((report.RESULTS / f"generalize-{row}-tree-v44{suf}.json").read_text())
                 ["totals"]["tree"]["dome"]["found"]
                 for row in ("val", "val-4m", "val-density-10m") for suf in ("", "-seed1", "-seed2"))
     assert cells[1] == "3"
