@@ -119,6 +119,8 @@ def paired_interval(name: str, against: str, seeds: list[int], *, draws: int = 2
     gains = np.zeros(draws)
     for r in rows:
         ids = sorted(set.intersection(*(set(a[(s, r)]) & set(b[(s, r)]) for s in seeds)))
+        if not ids:  # no site in common: nothing to pair
+            return None
         pick = rng.integers(0, len(ids), (draws, len(ids)))
         for side, sign in ((b, 1.0), (a, -1.0)):
             for s in seeds:
