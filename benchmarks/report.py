@@ -66,7 +66,7 @@ VAL_SEEDS = {
     "tree-v42": "`tree-v42`: arcade rows along circles, cells that partition a row (default)",
     "tree-v44": "rejected: a row's left-out bays, twins and bays beside a gap (`tree-v44`)",
     "rerun-v42": "`tree-v42` again, a fresh install at the versions of `constraints.txt` (`choose.py`)",
-    "tree-v45": "rejected: a band's ends from its plateau's median (`tree-v45`, seeds 0-1)",
+    "tree-v45": "rejected: a band's ends from its plateau's median (`tree-v45`)",
 }
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
 BEGIN = re.compile(r"<!-- generated: ([\w.-]+) -->\n")
