@@ -79,7 +79,7 @@ PART_SEQUENCE = 6
 #: The node table's sequence id of a split into posts and what they carry (:func:`posts`).
 POST_SEQUENCE = 7
 #: A part of :func:`parts` holds at least this share of the node's points (smaller
-#: pieces go with the nearest part; with ``stacked``, the nearest in height).
+#: pieces go with the nearest part).
 PART_MIN_SHARE = 0.05
 #: Two parts of :func:`parts` whose x-y boxes overlap by more than this share of the
 #: smaller box's area are one (one stands on or inside the other).
@@ -573,8 +573,7 @@ def parts(xyz: npt.ArrayLike, *, params: SequenceParams | None = None, stacked: 
 
     ``stacked=True`` keeps parts that stand one on another apart too (no joining by
     x-y boxes): the rest of a frame whose posts were cut out (:func:`posts`), its slab
-    and dome above its platform; a smaller piece then goes, whole, with the part nearest
-    to it in height (:func:`_by_height`), not point by point with the nearest part.
+    and dome above its platform.
 
     Unlike :func:`gaps` this sees any direction (a chattri standing 0.25 m off a minaret's
     balcony, beside it and overlapping it in height), and it is not a split by itself:
@@ -602,9 +601,7 @@ def parts(xyz: npt.ArrayLike, *, params: SequenceParams | None = None, stacked: 
         return None
     part = np.searchsorted(big, label)
     small = ~np.isin(label, big)
-    if small.any() and stacked:
-        part[small] = _by_height(a, label, part, small, len(big))
-    elif small.any():
+    if small.any():
         _, j = cKDTree(a[~small]).query(a[small])
         part[small] = part[~small][j]
     if not stacked:
@@ -613,38 +610,6 @@ def parts(xyz: npt.ArrayLike, *, params: SequenceParams | None = None, stacked: 
         return None
     children = tuple(np.flatnonzero(part == k).astype(np.int64) for k in range(int(part.max()) + 1))
     return Proposal(sequence=PART_SEQUENCE, children=children, cuts=np.zeros(0), curve=None)
-
-
-def _by_height(a: FloatArray, label: IntArray, part: IntArray, small: npt.NDArray[np.bool_],
-               n_parts: int) -> IntArray:
-    """The part of each small piece's points (``small``; ``label``: their pieces), when the
-    parts stand one on another: each piece whole with the part whose height range is
-    nearest to the piece's median height (0 inside it), of equals the one whose points come
-    nearest to the piece's. A post the posts missed goes with what it stands under, not with
-    the dome above it that its top point happens to be nearest to."""
-    z = a[:, 2]
-    lo = np.full(n_parts, np.inf)
-    hi = np.full(n_parts, -np.inf)
-    np.minimum.at(lo, part[~small], z[~small])
-    np.maximum.at(hi, part[~small], z[~small])
-    trees: dict[int, cKDTree] = {}
-    out = np.empty(int(small.sum()), dtype=part.dtype)
-    idx = np.flatnonzero(small)
-    order = np.argsort(label[idx], kind="stable")
-    _, starts = np.unique(label[idx][order], return_index=True)
-    for rows in np.split(order, starts[1:]):
-        mz = float(np.median(z[idx[rows]]))
-        gap = np.maximum(lo - mz, 0.0) + np.maximum(mz - hi, 0.0)
-        near = np.flatnonzero(gap <= gap.min() + 1e-9)
-        if len(near) > 1:
-            dist = []
-            for p in near.tolist():
-                if p not in trees:
-                    trees[p] = cKDTree(a[~small & (part == p)])
-                dist.append(float(trees[p].query(a[idx[rows]])[0].min()))
-            near = near[[int(np.argmin(dist))]]
-        out[rows] = near[0]
-    return out
 
 
 def _side_by_side(a: FloatArray, part: IntArray, n_parts: int) -> IntArray:
