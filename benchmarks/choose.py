@@ -167,8 +167,8 @@ def judge(name: str, against: str, seeds: list[int]) -> tuple[str, list[str]]:
     have = [s for s in seeds if all(result_path("val-domes", n, s).is_file() for n in (against, name))]
     fallen = []
     if have:
-        a, b = ({c: [class_f1(json.loads(result_path("val-domes", n, s).read_text()), c) for s in have]
-                 for c in ELEMENTS} for n in (against, name))
+        runs = {n: [json.loads(result_path("val-domes", n, s).read_text()) for s in have] for n in (against, name)}
+        a, b = ({c: [class_f1(r, c) for r in runs[n]] for c in ELEMENTS} for n in (against, name))
         tol = {c: max(a[c]) - min(a[c]) for c in ELEMENTS}  # the default's own spread over the seeds
         lines.append(f"dome batch, F1 per class, mean over seeds {', '.join(map(str, have))} (the default's range): "
                      + ", ".join(f"{c} {sum(a[c]) / len(have):.3f} -> {sum(b[c]) / len(have):.3f} ({tol[c]:.3f})"
