@@ -67,6 +67,11 @@ RANGE_ROWS = 4 * CHUNK_POINTS
 #: ingest's batch (``tiling.ingest.FLUSH_ROWS``), so that a run of dropped points finds its
 #: representatives in one or two parts (:class:`_KeptParts`).
 PART_ROWS = 2_000_000
+#: Fewest rows of a tile slice (:func:`plan_slices`): a unit costs tens of milliseconds
+#: whatever its size (store reads and writes), so cutting a small dense tile among sparse
+#: ones (a small scan, or one building in a wide sparse survey) would cost more than it
+#: balances (the median tile of a small scan may hold a few dozen rows).
+MIN_SLICE_ROWS = CHUNK_POINTS // 4
 #: ``segment = global coarse segment << LEAF_BITS | tree leaf node id``.
 LEAF_BITS = 20
 LABEL_DTYPES: dict[str, Any] = {
@@ -232,18 +237,24 @@ class _KeptParts:
         return out
 
 
-def plan_slices(sizes: dict[int, tuple[int, int]], *, above: float = 2.0) -> list[tuple[int, int, int, int]]:
+def plan_slices(sizes: dict[int, tuple[int, int]], *, above: float = 2.0,
+                min_rows: int | None = None) -> list[tuple[int, int, int, int]]:
     """The units of the tile phase, ``(tile, slice, first row, end row)``, from each
     tile's ``(rows, points)`` (points: its core rows and voxel-dropped points, the work).
 
     A tile above ``above`` times the median tile's points (tiles without points left out
     of the median) is cut into ``ceil(points / median)`` slices of equal rows; the others
     are one slice, so the largest unit stays near ``UNIT_BALANCE`` times the median unit.
+    No slice has fewer than ``min_rows`` rows (default ``MIN_SLICE_ROWS``).
 
-    >>> plan_slices({0: (10, 10), 1: (12, 10), 2: (50, 40), 3: (0, 0)})
+    >>> plan_slices({0: (10, 10), 1: (12, 10), 2: (50, 40), 3: (0, 0)}, min_rows=1)
     [(0, 0, 0, 10), (1, 0, 0, 12), (2, 0, 0, 12), (2, 1, 12, 25), (2, 2, 25, 37), (2, 3, 37, 50), (3, 0, 0, 0)]
+    >>> plan_slices({0: (10, 10), 1: (12, 10), 2: (50, 40)}, min_rows=20)
+    [(0, 0, 0, 10), (1, 0, 0, 12), (2, 0, 0, 25), (2, 1, 25, 50)]
     """
-    counts = part_counts({t: p for t, (_, p) in sizes.items()}, above=above, cap={t: r for t, (r, _) in sizes.items()})
+    least = MIN_SLICE_ROWS if min_rows is None else min_rows
+    counts = part_counts({t: p for t, (_, p) in sizes.items()}, above=above,
+                         cap={t: max(1, r // least) for t, (r, _) in sizes.items()})
     out = []
     for t in sorted(sizes):
         rows, k = sizes[t][0], counts[t]

@@ -281,7 +281,8 @@ def fuzz_specs(max_points: int = 300_000) -> Any:
     """
     from hypothesis import strategies as st
 
-    sizes = st.one_of(st.integers(10_000, 60_000), st.integers(10_000, max(10_000, max_points)))
+    top = max(10_000, max_points)
+    sizes = st.one_of(st.integers(10_000, min(60_000, top)), st.integers(10_000, top))
     tile = st.one_of(st.none(), st.integers(1, 12))
     common = {
         "seed": st.integers(0, 2**31 - 1),

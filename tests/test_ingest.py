@@ -422,7 +422,8 @@ def test_a_scan_in_feet_is_ingested_in_metres(scan_file, tmp_path):
     _ingest([scan_file], tmp_path / "m")
     _ingest([tmp_path / "ft.las"], tmp_path / "f")
     _ingest([tmp_path / "bare.las"], tmp_path / "b", units="us-ft")
-    _ingest([tmp_path / "bare.las"], tmp_path / "raw")  # no CRS, no units: taken as metres
+    # no CRS, no units: taken as metres (tiles of as many feet, not ten times the tiles)
+    _ingest([tmp_path / "bare.las"], tmp_path / "raw", tile_size=10.0 / ft)
 
     def metres(name: str) -> tuple[np.ndarray, dict]:
         st = RunStore.open(tmp_path / name)

@@ -22,7 +22,10 @@ from hollowtree.tiling.store import RunStore
 
 @pytest.fixture(scope="module")
 def uneven(tmp_path_factory) -> Path:
-    """A minaret on 10 m tiles: its tiles hold 61 to 12 240 points (10.4x the median)."""
+    """A minaret on 10 m tiles: its tiles hold 61 to 12 240 points (10.4x the median). The
+    labels' slices may hold as few as 500 rows here (``MIN_SLICE_ROWS`` is for real scans)."""
+    import hollowtree.pipeline.labels as labels
+
     d = tmp_path_factory.mktemp("units")
     synth("minaret", d / "m.laz", n_points=60_000, seed=2)
     store = d / "s"
@@ -30,7 +33,9 @@ def uneven(tmp_path_factory) -> Path:
         ingest([str(d / "m.laz")], str(store), IngestParams(tile_size=10.0, buffer=2.0), runner=run)
         run_coarse(str(store), CoarseParams(eps=0.3, block_points=20_000), runner=run)
         run_tree(str(store), TreeStageParams(batch_points=2_000), runner=run)
-        run_labels(str(store), use_tree=True, runner=run)
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(labels, "MIN_SLICE_ROWS", 500)
+            run_labels(str(store), use_tree=True, runner=run)
     return store
 
 
