@@ -12,15 +12,16 @@ the first resumes from them, only the tree reruns.
 Then it prints, for the variant and ``--against`` (the default's name), each seed's F1 per
 row and the three-row sum (0.5-2 M + 4 M + 10 M on 14 sites), the mean over the seeds and
 the verdict: *keep* when the variant's mean is at least :data:`BAR` above the default's and
-no class's element F1 in the dome batch, averaged over the seeds, fell by more than the
-default's own range over the seeds (its seed-to-seed spread). Both must have run in one
+no class's element F1, pooled over the sites of the sum's rows and the dome batch
+(:data:`CLASS_ROWS`) and averaged over the seeds, fell by more than the default's own range
+over the seeds (its seed-to-seed spread). Both must have run in one
 environment, the same CPU model and numeric packages (labels move with either; the JSON's
 ``machine``): the script says so when they did not. Where both sides' JSONs hold per-site
 totals it also prints a paired bootstrap interval of the gain (:func:`paired_interval`):
 how far the sites alone could move it. It informs; the verdict is the rule's.
 
 Run: ``python benchmarks/choose.py NAME [--set KEY=VALUE ...] [--seeds 0 1 2] [--rows ...]
-[--against rerun-v42]``; ``--judge`` only reads the JSONs. A row's full run on 2 cores: about
+[--against tree-v45]``; ``--judge`` only reads the JSONs. A row's full run on 2 cores: about
 4 (0.5-2 M), 7 (4 M) and 2 x 8 (10 M) minutes, the dome batch 5; the first run of a row also
 scans its sites and runs their coarse stage. Validation seeds only: the test split is never
 used to choose (docs/generalize.md).
@@ -55,6 +56,9 @@ SUM_ROWS = ("val", "val-4m", "val-density-10m", "val-10m-b")
 #: How much the mean three-row sum must rise for a variant to be kept.
 BAR = 0.02
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
+#: The rows whose sites each class's F1 is pooled over for the veto: the sum's and the dome
+#: batch (the sum's rows alone hold about 16 domes each).
+CLASS_ROWS = (*SUM_ROWS, "val-domes")
 
 
 def result_path(row: str, name: str, seed: int) -> Path:
@@ -70,10 +74,22 @@ def f1(*runs: dict) -> float:
     return 2 * r * p / (r + p) if r + p else 0.0
 
 
-def class_f1(run: dict, c: str) -> float:
-    """One class's F1 in one run."""
-    t = run["totals"]["tree"][c]
-    return 2 * t["found"] / max(t["gt"] + t["pred"], 1)
+def class_f1(*runs: dict) -> dict[str, float]:
+    """Each class's F1 in one run, or over several runs' sites together."""
+    out = {}
+    for c in ELEMENTS:
+        found, gt, pred = (sum(d["totals"]["tree"][c][k] for d in runs) for k in ("found", "gt", "pred"))
+        out[c] = 2 * found / max(gt + pred, 1)
+    return out
+
+
+def pooled_class_f1(name: str, seed: int) -> dict[str, float] | None:
+    """:func:`class_f1` over the sites of every row of :data:`CLASS_ROWS` at one tree seed;
+    None where a row is missing."""
+    files = [result_path(r, name, seed) for r in CLASS_ROWS]
+    if not all(f.is_file() for f in files):
+        return None
+    return class_f1(*(json.loads(f.read_text()) for f in files))
 
 
 def three_rows(name: str, seed: int) -> tuple[float, float, float] | None:
@@ -164,13 +180,14 @@ def judge(name: str, against: str, seeds: list[int]) -> tuple[str, list[str]]:
         means[n] = sum(done) / len(done) if len(done) == len(seeds) else None
         lines.append(f"{n:<28}" + "".join(f"{c:>24}" for c in cells)
                      + (f"{means[n]:>8.3f}{max(done) - min(done):>8.3f}" if means[n] is not None else f"{'-':>8}"))
-    have = [s for s in seeds if all(result_path("val-domes", n, s).is_file() for n in (against, name))]
+    pooled = {n: {s: pooled_class_f1(n, s) for s in seeds} for n in (against, name)}
+    have = [s for s in seeds if all(pooled[n][s] is not None for n in (against, name))]
     fallen = []
     if have:
-        runs = {n: [json.loads(result_path("val-domes", n, s).read_text()) for s in have] for n in (against, name)}
-        a, b = ({c: [class_f1(r, c) for r in runs[n]] for c in ELEMENTS} for n in (against, name))
+        a, b = ({c: [pooled[n][s][c] for s in have] for c in ELEMENTS} for n in (against, name))
         tol = {c: max(a[c]) - min(a[c]) for c in ELEMENTS}  # the default's own spread over the seeds
-        lines.append(f"dome batch, F1 per class, mean over seeds {', '.join(map(str, have))} (the default's range): "
+        lines.append(f"F1 per class over the four rows' and the dome batch's sites, mean over seeds "
+                     f"{', '.join(map(str, have))} (the default's range): "
                      + ", ".join(f"{c} {sum(a[c]) / len(have):.3f} -> {sum(b[c]) / len(have):.3f} ({tol[c]:.3f})"
                                  for c in ELEMENTS))
         fallen = [c for c in ELEMENTS if sum(a[c]) - sum(b[c]) > len(have) * tol[c] + 1e-12]
@@ -190,7 +207,7 @@ def judge(name: str, against: str, seeds: list[int]) -> tuple[str, list[str]]:
         return f"not judged: the dome batch is missing at seed {missing} (mean {gain:+.3f})", lines
     if gain >= BAR and not fallen:
         return f"keep: mean {gain:+.3f} (bar +{BAR})", lines
-    why = [f"mean {gain:+.3f}, the bar is +{BAR}"] + [f"the dome batch's {c} F1 fell by more than the default's range"
+    why = [f"mean {gain:+.3f}, the bar is +{BAR}"] + [f"the {c} F1 fell by more than the default's range"
                                                        for c in fallen]
     return "reject: " + "; ".join(why), lines
 
@@ -203,8 +220,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], metavar="K", help="tree seeds (default 0 1 2)")
     ap.add_argument("--rows", nargs="+", choices=list(ROWS), default=list(ROWS), metavar="ROW",
                     help=f"rows to run (default all: {', '.join(ROWS)})")
-    ap.add_argument("--against", default="rerun-v42", metavar="NAME",
-                    help="the default's run in this environment (default rerun-v42: tree-v42, constraints.txt)")
+    ap.add_argument("--against", default="tree-v45", metavar="NAME",
+                    help="the default's run in this environment (default tree-v45, made with constraints.txt)")
     ap.add_argument("--work", type=Path, default=REPO / "out" / "choose", help="scans and stores, one folder per row")
     ap.add_argument("--force", action="store_true", help="rerun rows whose JSON exists")
     ap.add_argument("--judge", action="store_true", help="run nothing; judge the JSONs there are")

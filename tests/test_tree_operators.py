@@ -312,6 +312,21 @@ def test_plateau_ends_from_each_side():
     assert np.isnan(stop[0])
 
 
+def test_robust_plateau_ends_past_an_edge_spike():
+    """A band 4-6 with a spike on its low edge: the plain ends stop round the spike, the
+    robust ones (the plateau's median as its top, the outermost bins at the level) reach
+    the band's far end."""
+    rng = np.random.default_rng(0)
+    x = np.r_[rng.uniform(0, 10, 2000), rng.uniform(4, 6, 1000), rng.uniform(4.0, 4.2, 60)]
+    hist = v2(x, n_fine=100, sigma=0.5)
+    pk = np.array([int(np.argmax(hist.values))])
+    start, stop = plateaus(hist, pk, level=0.9, per_side=True, min_drop=0.25)
+    assert stop[0] < 5.0
+    start, stop = plateaus(hist, pk, level=0.9, per_side=True, min_drop=0.25, robust=True)
+    assert start[0] == pytest.approx(4.0, abs=0.3)
+    assert stop[0] == pytest.approx(6.0, abs=0.3)
+
+
 # --------------------------------------------------------------------------- energy
 def test_energy_terms_as_method_md_writes_them():
     assert e1([10, 10, 10]) == 1.0

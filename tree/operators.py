@@ -501,13 +501,19 @@ def _refine(hist: Histogram, peaks: IntArray) -> FloatArray:
 
 
 def plateaus(hist: Histogram, peaks: npt.ArrayLike, *, level: float = 0.25, per_side: bool = False,
-             min_drop: float = 0.0) -> tuple[FloatArray, FloatArray]:
+             min_drop: float = 0.0, robust: bool = False) -> tuple[FloatArray, FloatArray]:
     """Start and end of the plateau around each peak of limited bins ``peaks``: the run
     around the peak's fine maximum where the fine signal stays above ``level`` of the way
     from the higher of its region's two valleys to the maximum (:func:`rho` cuts at the
     run's middle with ``level`` 0.25). ``per_side``: each end's level is measured from the
     valley on its own side (a band between a low and a high stretch has both ends); an
-    end whose valley lies less than ``min_drop`` of the top below it is NaN (no end)."""
+    end whose valley lies less than ``min_drop`` of the top below it is NaN (no end).
+
+    ``robust``: the top is the plateau's median (the fine signal over the run above half
+    way from the higher valley to the maximum), not its maximum, and each end is the
+    outermost fine bin between the peak and that side's valley at or above the level: a
+    spike on the plateau's edge, or a shallow dip inside it, does not end the plateau
+    early (the bands of :func:`tree.sequences.occupancy_cut`)."""
     fe, fv = hist.fine_edges, hist.fine_values
     nf = len(fv)
     tops = []
@@ -526,16 +532,31 @@ def plateaus(hist: Histogram, peaks: npt.ArrayLike, *, level: float = 0.25, per_
         if not per_side:
             left = right = max(left, right)
         top = float(fv[j])
+        if robust:
+            half = max(left, right) + 0.5 * (top - max(left, right))
+            a, b = _run_above(fv, j, lo, hi, half, half)
+            top = float(np.median(fv[a:b + 1]))
         cut_a, cut_b = left + level * (top - left), right + level * (top - right)
-        a = j
-        while a > lo and fv[a - 1] >= cut_a:
-            a -= 1
-        b = j
-        while b < hi and fv[b + 1] >= cut_b:
-            b += 1
+        if robust:
+            a = lo + int(np.argmax(fv[lo:j + 1] >= cut_a))
+            b = hi - int(np.argmax(fv[j:hi + 1][::-1] >= cut_b))
+        else:
+            a, b = _run_above(fv, j, lo, hi, cut_a, cut_b)
         start.append(fe[a] if top - left >= min_drop * top else np.nan)
         stop.append(fe[b + 1] if top - right >= min_drop * top else np.nan)
     return np.asarray(start, dtype=np.float64), np.asarray(stop, dtype=np.float64)
+
+
+def _run_above(fv: FloatArray, j: int, lo: int, hi: int, cut_a: float, cut_b: float) -> tuple[int, int]:
+    """First and last fine bin of the run around ``j`` (within ``lo..hi``) where ``fv``
+    stays at or above ``cut_a`` (on the low side) and ``cut_b`` (on the high side)."""
+    a = j
+    while a > lo and fv[a - 1] >= cut_a:
+        a -= 1
+    b = j
+    while b < hi and fv[b + 1] >= cut_b:
+        b += 1
+    return a, b
 
 
 def split_at(x: npt.ArrayLike, cuts: npt.ArrayLike) -> list[IntArray]:

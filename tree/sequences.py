@@ -87,8 +87,9 @@ PART_MAX_OVERLAP = 0.2
 #: A column of the wall's projection is empty, for :func:`gaps`, when it holds fewer
 #: occupied cells than this share of the node's full columns (their 90th percentile).
 GAP_LEVEL = 0.02
-#: Where a band ends (:func:`occupancy_cut` with ``bands``): the occupancy is this share
-#: of the way from the valley on that side to the band's top.
+#: Where a band ends (:func:`occupancy_cut` with ``bands``): the outermost place where the
+#: occupancy is this share of the way from the valley on that side to the band's level
+#: (its plateau's median, so a spike on one edge neither sets the level nor ends the band).
 BAND_LEVEL = 0.9
 
 
@@ -447,8 +448,8 @@ def occupancy_cut(x: FloatArray, y: FloatArray, params: SequenceParams, *,
 
     ``bands`` (the storeys): also the bands, each peak's plateau with two ends inside
     ``x`` (each end measured from the valley on its own side, at :data:`BAND_LEVEL` of the
-    way to the top; a side whose valley lies less than :data:`OPEN_HIGH_PROMINENCE` of the
-    top below it has no end): returns ``(cuts, bands)``, ``bands`` of shape (m, 2).
+    way to the plateau's median: ``plateaus(robust=True)``; a side whose valley lies less
+    than :data:`OPEN_HIGH_PROMINENCE` of the top below it has no end): returns ``(cuts, bands)``, ``bands`` of shape (m, 2).
     """
     kw = dict(sigma=params.sigma, bins_per_crossing=params.bins_per_crossing)
     if len(x) == 0:
@@ -498,7 +499,7 @@ def _cuts(hist: Histogram, prominence: float, open_high: bool,
     cuts = _refine(hist, peaks)
     if not bands:
         return cuts
-    start, stop = plateaus(hist, peaks, level=BAND_LEVEL, per_side=True, min_drop=OPEN_HIGH_PROMINENCE)
+    start, stop = plateaus(hist, peaks, level=BAND_LEVEL, per_side=True, min_drop=OPEN_HIGH_PROMINENCE, robust=True)
     margin = 2.0 * float(hist.fine_edges[1] - hist.fine_edges[0])
     inside = np.isfinite(start) & np.isfinite(stop) & (start > lo + margin) & (stop < hi - margin)
     return cuts, np.column_stack([start, stop])[inside]
