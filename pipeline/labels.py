@@ -251,6 +251,8 @@ def plan_slices(sizes: dict[int, tuple[int, int]], *, above: float = 2.0,
     [(0, 0, 0, 10), (1, 0, 0, 12), (2, 0, 0, 12), (2, 1, 12, 25), (2, 2, 25, 37), (2, 3, 37, 50), (3, 0, 0, 0)]
     >>> plan_slices({0: (10, 10), 1: (12, 10), 2: (50, 40)}, min_rows=20)
     [(0, 0, 0, 10), (1, 0, 0, 12), (2, 0, 0, 25), (2, 1, 25, 50)]
+    >>> plan_slices({0: (10, 10), 1: (12, 10), 2: (50, 40)})  # small tiles stay whole
+    [(0, 0, 0, 10), (1, 0, 0, 12), (2, 0, 0, 50)]
     """
     least = MIN_SLICE_ROWS if min_rows is None else min_rows
     counts = part_counts({t: p for t, (_, p) in sizes.items()}, above=above,
