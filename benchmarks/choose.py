@@ -10,15 +10,16 @@ their stores live in ``--work`` (one folder per row): the coarse stage of every 
 the first resumes from them, only the tree reruns.
 
 Then it prints, for the variant and ``--against`` (the default's name), each seed's F1 per
-row and the three-row sum (0.5-2 M + 4 M + 10 M on 14 sites), the mean over the seeds and
-the verdict: *keep* when the variant's mean is at least :data:`BAR` above the default's and
-no class's element F1, pooled over the sites of the sum's rows and the dome batch
-(:data:`CLASS_ROWS`) and averaged over the seeds, fell by more than the default's own range
-over the seeds (its seed-to-seed spread). Both must have run in one
-environment, the same CPU model and numeric packages (labels move with either; the JSON's
-``machine``): the script says so when they did not. Where both sides' JSONs hold per-site
-totals it also prints a paired bootstrap interval of the gain (:func:`paired_interval`):
-how far the sites alone could move it. It informs; the verdict is the rule's.
+row and the three-row sum (0.5-2 M + 4 M + 10 M on 14 sites), and each class's element F1
+pooled over the sites of the sum's rows and the dome batch (:data:`CLASS_ROWS`). The
+verdict: *keep* when the macro mean of those four class F1s, averaged over the seeds, rises
+with a paired bootstrap interval (:func:`macro_interval`: the validation sites resampled, each
+with all its rows, the same sites for both sides) whose lower end is above zero, and no class's
+F1 fell by more than the default's own range over the seeds (its seed-to-seed spread). The
+macro mean weighs each class as the issue's per-class target does; the sum, ~60 % arches,
+could not see a change in domes. Both must have run in one environment, the same CPU model
+and numeric packages (labels move with either; the JSON's ``machine``): the script says so
+when they did not. The sum's paired interval (:func:`paired_interval`) is printed beside it.
 
 Run: ``python benchmarks/choose.py NAME [--set KEY=VALUE ...] [--seeds 0 1 2] [--rows ...]
 [--against tree-v45]``; ``--judge`` only reads the JSONs. A row's full run on 2 cores: about
@@ -53,8 +54,11 @@ ROWS: dict[str, list[str]] = {
 }
 #: The rows of the sum; the 10 M row is its two halves' sites together.
 SUM_ROWS = ("val", "val-4m", "val-density-10m", "val-10m-b")
-#: How much the mean three-row sum must rise for a variant to be kept.
-BAR = 0.02
+#: The two-sided level of the paired intervals; a variant is kept when the lower end of the
+#: macro mean's gain is above zero (above :data:`ZERO`: a resample without the sites that
+#: moved gains nothing but rounding).
+LEVEL = 0.9
+ZERO = 1e-9
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
 #: The rows whose sites each class's F1 is pooled over for the veto: the sum's and the dome
 #: batch (the sum's rows alone hold about 16 domes each).
@@ -149,6 +153,64 @@ def paired_interval(name: str, against: str, seeds: list[int], *, draws: int = 2
     return float(lo), float(hi)
 
 
+def _class_site_counts(name: str, seeds: list[int]) -> dict[int, dict[int, object]] | None:
+    """Per tree seed, each validation site's (found, gt, pred) per class (rows of
+    :data:`ELEMENTS`), summed over the rows of :data:`CLASS_ROWS` that hold the site (one
+    site at 0.5-2, 4 and 10 M is one draw of the bootstrap); None where a JSON is missing or
+    records no per-site totals."""
+    import numpy as np
+
+    out: dict[int, dict[int, np.ndarray]] = {}
+    for s in seeds:
+        for r in CLASS_ROWS:
+            f = result_path(r, name, s)
+            if not f.is_file():
+                return None
+            sites = json.loads(f.read_text()).get("sites", [])
+            if not sites or any("totals" not in x for x in sites):
+                return None
+            for x in sites:
+                c = np.asarray([[x["totals"][e][k] for k in ("found", "gt", "pred")] for e in ELEMENTS], float)
+                site = out.setdefault(s, {})
+                site[x["seed"]] = site.get(x["seed"], 0) + c
+    return out
+
+
+def macro_f1(counts):
+    """The mean over :data:`ELEMENTS` of each class's F1 from (..., class, (found, gt, pred))
+    counts; a class with neither elements nor predictions counts as 1 (nothing to find, no
+    false call)."""
+    import numpy as np
+
+    found, gt, pred = counts[..., 0], counts[..., 1], counts[..., 2]
+    return np.where(gt + pred > 0, 2 * found / np.maximum(gt + pred, 1), 1.0).mean(axis=-1)
+
+
+def macro_interval(name: str, against: str, seeds: list[int], *, draws: int = 2000,
+                   level: float = LEVEL) -> tuple[float, float, float] | None:
+    """The gain of ``name``'s macro mean of the pooled class F1s over ``against``'s, averaged
+    over ``seeds``, and a ``level`` interval of it from resampling the validation sites (each
+    site with all its rows, the same draw for both sides at every tree seed: a paired
+    bootstrap). None where either side lacks per-site totals or they share no site."""
+    import numpy as np
+
+    a, b = _class_site_counts(against, seeds), _class_site_counts(name, seeds)
+    if a is None or b is None:
+        return None
+    ids = sorted(set.intersection(*(set(side[s]) for side in (a, b) for s in seeds)))
+    if not ids:
+        return None
+    pick = np.random.default_rng(0).integers(0, len(ids), (draws, len(ids)))
+    gain, gains = 0.0, np.zeros(draws)
+    for side, sign in ((b, 1.0), (a, -1.0)):
+        for s in seeds:
+            c = np.stack([side[s][i] for i in ids])  # (sites, class, 3)
+            gain += sign * float(macro_f1(c.sum(axis=0))) / len(seeds)
+            gains += sign * macro_f1(c[pick].sum(axis=1)) / len(seeds)
+    lo, hi = np.quantile(gains, [(1 - level) / 2, (1 + level) / 2])
+    return gain, float(lo), float(hi)
+
+
 def environment(run: dict) -> str:
     """A run's CPU model and numeric packages (``machine`` of its JSON), as one line."""
     m = run.get("machine", {})
@@ -199,16 +261,21 @@ def judge(name: str, against: str, seeds: list[int]) -> tuple[str, list[str]]:
     if means[name] is None or means[against] is None:
         return "not judged: a row is missing", lines
     ci = paired_interval(name, against, seeds)
-    lines.append("paired over the sites, 90 % of resamples put the gain in "
+    lines.append("the sum's gain: paired over the sites, 90 % of resamples put it in "
                  + (f"[{ci[0]:+.3f}, {ci[1]:+.3f}]" if ci else "(not known: a side's JSONs hold no per-site totals)"))
-    gain = means[name] - means[against]
     if len(have) < len(seeds):
         missing = ", ".join(str(s) for s in seeds if s not in have)
-        return f"not judged: the dome batch is missing at seed {missing} (mean {gain:+.3f})", lines
-    if gain >= BAR and not fallen:
-        return f"keep: mean {gain:+.3f} (bar +{BAR})", lines
-    why = [f"mean {gain:+.3f}, the bar is +{BAR}"] + [f"the {c} F1 fell by more than the default's range"
-                                                       for c in fallen]
+        return f"not judged: the dome batch is missing at seed {missing}", lines
+    macro = macro_interval(name, against, seeds)
+    if macro is None:
+        return "not judged: a side's JSONs hold no per-site totals (rerun the default with this choose.py)", lines
+    gain, lo, hi = macro
+    lines.append(f"the macro mean of the class F1s: {gain:+.4f}, {LEVEL:.0%} of paired resamples of the sites "
+                 f"in [{lo:+.4f}, {hi:+.4f}]")
+    if lo > ZERO and not fallen:
+        return f"keep: macro mean {gain:+.4f}, interval [{lo:+.4f}, {hi:+.4f}] above zero", lines
+    why = ([] if lo > ZERO else [f"macro mean {gain:+.4f}, its interval [{lo:+.4f}, {hi:+.4f}] reaches zero"]) + [
+        f"the {c} F1 fell by more than the default's range" for c in fallen]
     return "reject: " + "; ".join(why), lines
 
 
