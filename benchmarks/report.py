@@ -62,9 +62,7 @@ LATEST = {
 #: docs/generalize.md): the name part of their JSONs (``generalize-val-4m-<name>.json`` is
 #: seed 0, ``...-<name>-seed1.json`` seed 1, ...), in the order they were run.
 VAL_SEEDS = {
-    "tree-v40": "`tree-v40`: the look-ahead from any node (`gen-v4`)",
     "tree-v42": "`tree-v42`: arcade rows along circles, cells that partition a row",
-    "tree-v44": "rejected: a row's left-out bays, twins and bays beside a gap (`tree-v44`)",
     "rerun-v42": "`tree-v42` again, a fresh install at the versions of `constraints.txt` (`choose.py`)",
     "tree-v45": "`tree-v45`: a band's ends from its plateau's median (default)",
 }
@@ -432,42 +430,57 @@ def five_sites() -> str:
 
 # --- docs/decisions/method.md ------------------------------------------------------------
 
-def _three_rows(name: str) -> tuple[float, float, float, float | None] | None:
-    """F1 of one run's three validation rows (0.5-2 M, 4 M, 10 M on sites 100 000-100 006),
-    and of the 10 M row on its 14 sites (with 100 007-100 013, ``val-10m-b``; None where
-    not run), or None where one of the three is missing."""
+def _three_rows(name: str) -> tuple[float, float, float] | None:
+    """F1 of one run's three validation rows (0.5-2 M, 4 M, and 10 M on its 14 sites, the
+    sites 100 000-100 006 with 100 007-100 013 of ``val-10m-b``), or None where one is
+    missing."""
     files = [RESULTS / f"generalize-{row}-{name}.json" for row in ("val", "val-4m", "val-density-10m", "val-10m-b")]
-    if not all(f.is_file() for f in files[:3]):
+    if not all(f.is_file() for f in files):
         return None
-    a, b, c = (json.loads(f.read_text()) for f in files[:3])
-    return _f1(a), _f1(b), _f1(c), _f1(c, json.loads(files[3].read_text())) if files[3].is_file() else None
+    a, b, c, d = (json.loads(f.read_text()) for f in files)
+    return _f1(a), _f1(b), _f1(c, d)
+
+
+def _pooled_classes(name: str) -> dict[str, float] | None:
+    """Each class's F1 over the sites of the three rows and the dome batch together (the
+    selection rule's, ``benchmarks/choose.py``), or None where a row is missing."""
+    files = [RESULTS / f"generalize-{row}-{name}.json"
+             for row in ("val", "val-4m", "val-density-10m", "val-10m-b", "val-domes")]
+    if not all(f.is_file() for f in files):
+        return None
+    runs = [json.loads(f.read_text())["totals"]["tree"] for f in files]
+    return {c: 2 * sum(t[c]["found"] for t in runs) / max(sum(t[c]["gt"] + t[c]["pred"] for t in runs), 1)
+            for c in ELEMENTS}
 
 
 def val_seeds() -> str:
-    """Each variant of :data:`VAL_SEEDS`: each row's F1 averaged over tree seeds 0-2, the F1 sum
-    per seed, the sums' mean and range (the selection rule from ``tree-v36``), and the mean
-    with the 10 M row on its 14 sites (the rule after ``tree-v40``), where run."""
-    out = ["| variant | 0.5-2 M | 4 M | 10 M | F1 sum, seeds 0 / 1 / 2 | mean | range | mean, 10 M on 14 sites |",
+    """Each variant of :data:`VAL_SEEDS`, averaged over tree seeds 0-2: each row's F1, the F1
+    sum per seed with its mean (the selection rule to ``tree-v46``), and each class's F1
+    pooled over the rows' and the dome batch's sites with their mean (the rule from
+    ``tree-v47``), where run."""
+    out = ["| variant | 0.5-2 M | 4 M | 10 M | F1 sum, seeds 0 / 1 / 2 | mean | arch / dome / minaret / pillar | class mean |",
            "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for name, what in VAL_SEEDS.items():
-        runs = [r for r in (_three_rows(name if k == 0 else f"{name}-seed{k}") for k in range(3)) if r is not None]
+        seeds = [name if k == 0 else f"{name}-seed{k}" for k in range(3)]
+        runs = [r for r in map(_three_rows, seeds) if r is not None]
         if not runs:
             continue
-        sums = [sum(r[:3]) for r in runs]
+        sums = [sum(r) for r in runs]
         rows = [sum(r[j] for r in runs) / len(runs) for j in range(3)]
-        wide = [r[0] + r[1] + r[3] for r in runs if r[3] is not None]
+        pooled = [p for p in map(_pooled_classes, seeds) if p is not None]
+        cls = {c: sum(p[c] for p in pooled) / len(pooled) for c in ELEMENTS} if len(pooled) == len(runs) else None
         out.append(f"| {what} | " + " | ".join(f"{x:.3f}" for x in rows) + " | "
-                   + " / ".join(f"{x:.3f}" for x in sums)
-                   + f" | **{sum(sums) / len(sums):.3f}** | {max(sums) - min(sums):.3f} | "
-                   + (f"**{sum(wide) / len(wide):.3f}**" if len(wide) == len(runs) else "-") + " |")
+                   + " / ".join(f"{x:.3f}" for x in sums) + f" | **{sum(sums) / len(sums):.3f}** | "
+                   + (" / ".join(f"{cls[c]:.3f}" for c in ELEMENTS) + f" | **{sum(cls.values()) / 4:.4f}** |"
+                      if cls else "- | - |"))
     return "\n".join(out)
 
 
 def val_classes(names: list[str]) -> str:
     """Per element class, each variant of :data:`VAL_SEEDS` named (or every one): found,
-    predicted and F1 over its three validation rows, averaged over the tree seeds run. The
-    selection rule sums all elements, where a class of few (16 domes at 0.5-2 M) barely
-    moves it; this shows what a variant trades between classes."""
+    predicted and F1 over the sites of its three validation rows and the dome batch (the
+    selection rule's, ``benchmarks/choose.py``), averaged over the tree seeds run: what a
+    variant trades between classes."""
     out = ["| variant | seeds | " + " | ".join(f"{c} found / pred / F1" for c in ELEMENTS) + " |",
            "| --- | --- | " + " | ".join("---" for _ in ELEMENTS) + " |"]
     for name in names or list(VAL_SEEDS):
@@ -475,7 +488,7 @@ def val_classes(names: list[str]) -> str:
         seeds = 0
         for k in range(3):
             files = [RESULTS / f"generalize-{row}-{name if k == 0 else f'{name}-seed{k}'}.json"
-                     for row in ("val", "val-4m", "val-density-10m")]
+                     for row in ("val", "val-4m", "val-density-10m", "val-10m-b", "val-domes")]
             if not all(f.is_file() for f in files):
                 continue
             seeds += 1

@@ -48,12 +48,13 @@ def test_every_generator_is_used_and_render_is_idempotent(report):
 def test_per_class_view_of_a_validation_variant_adds_up_its_runs(report, capsys):
     import json
 
-    assert report.main(["--classes", "tree-v44"]) == 0
-    line = [x for x in capsys.readouterr().out.splitlines() if x.startswith("| tree-v44 |")][0]
+    assert report.main(["--classes", "tree-v45"]) == 0
+    line = [x for x in capsys.readouterr().out.splitlines() if x.startswith("| tree-v45 |")][0]
     cells = [c.strip() for c in line.strip("|").split("|")]
-    domes = sum(json.loads((report.RESULTS / f"generalize-{row}-tree-v44{suf}.json").read_text())
+    domes = sum(json.loads((report.RESULTS / f"generalize-{row}-tree-v45{suf}.json").read_text())
                 ["totals"]["tree"]["dome"]["found"]
-                for row in ("val", "val-4m", "val-density-10m") for suf in ("", "-seed1", "-seed2"))
+                for row in ("val", "val-4m", "val-density-10m", "val-10m-b", "val-domes")
+                for suf in ("", "-seed1", "-seed2"))
     assert cells[1] == "3"
     assert cells[3].startswith(f"{domes / 3:.1f} / ")
     with pytest.raises(SystemExit) as e:
