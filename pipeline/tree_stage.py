@@ -286,7 +286,7 @@ def spread_labels(url: str, b: int, j: int, rows: tuple[int, int], csr: tuple[in
     for a in range(rows[0], rows[1], step):
         z = min(a + step, rows[1])
         pts = store.read_slice("coarse/csr/xyz", csr[0] + a, csr[0] + z).astype(np.float64) * np.asarray(scale)
-        _, near = kd.query(pts, workers=task_threads())
+        _, near = kd.query(pts, workers=task_threads(rows=len(pts)))
         for k, v in sampled.items():
             store.write_slice(f"tree/batches/{b}/{k}", a, v[near])
         counts += np.bincount(sampled["leaf"][near].astype(np.int64), minlength=len(counts))

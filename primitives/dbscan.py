@@ -188,7 +188,7 @@ def default_eps(xyz: npt.ArrayLike, *, k: int = 8, factor: float = 3.0) -> float
         )
     tree = cKDTree(pts, balanced_tree=False)
     queries = pts[:: max(1, len(pts) // 200_000)]
-    dist, _ = tree.query(queries, k=[k + 1], workers=task_threads())
+    dist, _ = tree.query(queries, k=[k + 1], workers=task_threads(rows=len(queries)))
     spacing = float(np.median(dist))
     if spacing <= 0:
         raise ConfigError(
@@ -349,7 +349,7 @@ def _core_points(
         for s in range(0, len(rest), chunk):
             q = rest[s : s + chunk]
             dist, _ = tree.query(
-                pts[q], k=[min_samples], distance_upper_bound=eps * (1 + 1e-9), workers=task_threads()
+                pts[q], k=[min_samples], distance_upper_bound=eps * (1 + 1e-9), workers=task_threads(rows=len(q))
             )
             core[q] = dist[:, 0] <= eps
     return core
@@ -446,7 +446,8 @@ def _label_border(
     big = np.iinfo(np.int64).max
     for s in range(0, len(rest), chunk):
         q = rest[s : s + chunk]
-        dist, idx = tree.query(pts[q], k=k, distance_upper_bound=eps * (1 + 1e-9), workers=task_threads())
+        dist, idx = tree.query(pts[q], k=k, distance_upper_bound=eps * (1 + 1e-9),
+                               workers=task_threads(rows=len(q)))
         dist, idx = dist.reshape(len(q), k), idx.reshape(len(q), k)
         near = dist <= eps
         idx = np.where(near, idx, 0)
@@ -525,7 +526,8 @@ def _distances(windows: Iterable[tuple[npt.ArrayLike, npt.ArrayLike]], k: int, f
                               f"entry per point ({len(pts)}). Got {len(m)} instead.")
         if len(pts) <= k or not m.any():
             continue
-        found.append(cKDTree(pts, balanced_tree=False).query(pts[m], k=[k + 1], workers=task_threads())[0][:, 0])
+        found.append(cKDTree(pts, balanced_tree=False).query(pts[m], k=[k + 1],
+                                                            workers=task_threads(rows=int(m.sum())))[0][:, 0])
     return np.concatenate(found)
 
 
@@ -584,9 +586,9 @@ def sparse_points(xyz: npt.ArrayLike, mask: npt.ArrayLike, spacing: float, facto
     # points (a minority) need their exact spacing, for the median.
     tree = cKDTree(p, balanced_tree=False)
     bound = factor * spacing
-    d = tree.query(p[rows], k=k + 1, distance_upper_bound=bound, workers=task_threads())[0][:, k]
+    d = tree.query(p[rows], k=k + 1, distance_upper_bound=bound, workers=task_threads(rows=len(rows)))[0][:, k]
     keep = ~(d < bound)
     if not keep.any():
         return rows[:0].astype(np.int64), 0.0
-    d_sparse = tree.query(p[rows[keep]], k=k + 1, workers=task_threads())[0][:, k]
+    d_sparse = tree.query(p[rows[keep]], k=k + 1, workers=task_threads(rows=int(keep.sum())))[0][:, k]
     return rows[keep].astype(np.int64), float(np.median(d_sparse))

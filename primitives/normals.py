@@ -192,7 +192,7 @@ def estimate_normals(
     chunk = max(1, _CHUNK_NEIGHBOURS // kk)
     for start in range(0, len(todo), chunk):
         q = todo[start : start + chunk]
-        dist, idx = tree.query(pts[q], k=kk, distance_upper_bound=bound, workers=task_threads())
+        dist, idx = tree.query(pts[q], k=kk, distance_upper_bound=bound, workers=task_threads(rows=len(q)))
         nrm, curv, ok = _pca(cols, q, dist.reshape(len(q), kk), idx.reshape(len(q), kk), radius)
         normals[q], curvature[q], valid[q] = nrm, curv, ok
 

@@ -124,6 +124,25 @@ def test_arrays_are_made_with_few_store_requests(tmp_path):
     assert zarr.open_group(tmp_path / "s.zarr", mode="r")["tiles/5/xyz"].metadata.codecs[1].cname.value == "lz4"
 
 
+def test_an_array_written_whole_is_one_chunk_of_its_rows_up_to_a_full_chunk(store):
+    """A chunk is encoded whole, fill included: a 1 000-row array in a 262 144-row chunk
+    would compress a quarter million rows of fill at every write."""
+    import zarr
+
+    store.write_unit("g", {"short": np.arange(1000, dtype=np.int32), "xyz": np.ones((10, 3), np.float32),
+                           "long": np.zeros(CHUNK_POINTS + 5, np.uint8), "empty": np.zeros(0, np.int64)})
+    root = zarr.open_group(store.url, mode="r")
+    assert root["g/short"].chunks == (1000,)
+    assert root["g/xyz"].chunks == (10, 3)
+    assert root["g/long"].chunks == (CHUNK_POINTS,)
+    assert root["g/empty"].chunks == (1,)
+    got = store.read_unit("g")
+    np.testing.assert_array_equal(got["short"], np.arange(1000))
+    assert got["long"].shape == (CHUNK_POINTS + 5,)
+    assert got["empty"].shape == (0,)
+    np.testing.assert_array_equal(store.read_slice("g/short", 990, 1000), np.arange(990, 1000))
+
+
 def test_a_record_says_where_and_how_long_its_unit_ran(store):
     """Each record holds the seconds since its handle was opened or last recorded, the
     process's CPU seconds, the worker (host:pid) and when it finished; ``info`` wins."""

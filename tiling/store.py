@@ -201,14 +201,16 @@ class RunStore:
         raise AssertionError("unreachable")
 
     def write_unit(self, group: str, arrays: Mapping[str, npt.NDArray[Any]]) -> None:
-        """Write ``arrays`` into group path ``group`` (replacing what was there)."""
+        """Write ``arrays`` into group path ``group`` (replacing what was there). An array
+        shorter than :data:`CHUNK_POINTS` rows is one chunk of its rows: a chunk is encoded
+        whole, its fill too."""
         g = self._require_group(group)
         for name in list(g.array_keys()):
             del g[name]
         for name, values in arrays.items():
             values = np.ascontiguousarray(values)
             arr = _new_array(g, name, shape=values.shape, dtype=values.dtype,
-                             chunks=(CHUNK_POINTS,) + values.shape[1:])
+                             chunks=(max(1, min(CHUNK_POINTS, len(values))),) + values.shape[1:])
             if values.size:
                 arr[...] = values
 
