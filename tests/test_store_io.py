@@ -143,6 +143,20 @@ def test_an_array_written_whole_is_one_chunk_of_its_rows_up_to_a_full_chunk(stor
     np.testing.assert_array_equal(store.read_slice("g/short", 990, 1000), np.arange(990, 1000))
 
 
+def test_a_reset_keeps_the_run_lock_and_says_nothing_of_it(store):
+    import warnings
+
+    store.write_unit("tiles/0", {"xyz": np.ones((4, 3), np.int32)})
+    lock = Path(store.url) / "run.lock"
+    lock.write_text("{}")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        store.reset({"ingest": {}})
+    assert lock.read_text() == "{}"
+    assert not store.has("tiles/0")
+    assert store.has("records")
+
+
 def test_a_record_says_where_and_how_long_its_unit_ran(store):
     """Each record holds the seconds since its handle was opened or last recorded, the
     process's CPU seconds, the worker (host:pid) and when it finished; ``info`` wins."""

@@ -155,7 +155,10 @@ class RunStore:
         For a run whose ingest parameters changed: everything in the store was made
         from the old ones. Files beside the Zarr hierarchy (the run lock) stay.
         """
-        for name in list(self._root.group_keys()) + list(self._root.array_keys()):
+        with warnings.catch_warnings():  # Zarr names every file beside the hierarchy
+            warnings.filterwarnings("ignore", message="Object at .* is not recognized", category=UserWarning)
+            names = list(self._root.group_keys()) + list(self._root.array_keys())
+        for name in names:
             del self._root[name]
         fs, base = self._fs()
         if fs.exists(base):  # fragment files beside the hierarchy; before the group is made again
