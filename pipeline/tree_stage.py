@@ -57,7 +57,7 @@ SPREAD_STAGE = "tree.spread"
 #: Version of the tree's algorithm (tree/): part of the stage's parameters hash and of the
 #: workflow parameters a run records, so a store made by an older version is redone. What
 #: each version changed is in CHANGELOG.md (and git).
-TREE_ALGORITHM = "tree-v45"
+TREE_ALGORITHM = "tree-v47"
 #: Points sampled from each wall instance for the frames (tree/frames.py): a pier's face
 #: beside a bay's jamb is a strip a few tenths of a metre wide in a facade's wall.
 WALL_SAMPLE_POINTS = 16384

@@ -408,6 +408,34 @@ def test_parts_apart_are_found_in_any_direction():
     assert parts(xyz, params=SequenceParams(part_gap=0.5)) is None  # 0.3 m apart: one part at 0.5 m
 
 
+def test_stacked_parts_of_a_frame_take_a_small_piece_whole_by_height():
+    """The rest of a posts split (``stacked``) that is a frame's: a stub of a post the posts
+    missed, under the dome's overhanging rim, goes whole with the slab it stands under,
+    where point by point its top would go with the dome. Beside a wall as tall as the posts
+    (not a frame), it goes point by point."""
+    from hollowtree.tree.sequences import parts
+
+    rng = np.random.default_rng(3)
+    slab = rng.uniform(-1, 1, (900, 3)) * [1.0, 1.0, 0.2] + [0.0, 0.0, 2.2]  # 2 x 2 m, z 2.0-2.4
+    u = rng.normal(size=(2500, 3))
+    u[:, 2] = np.abs(u[:, 2])
+    dome = u / np.linalg.norm(u, axis=1, keepdims=True) * 1.5 + [0.0, 0.0, 2.65]  # its rim overhangs the slab
+    stub = np.c_[np.full(80, 1.45), np.zeros(80), np.linspace(0.0, 2.4, 80)]  # under 5 % of the node
+    xyz = np.r_[slab, dome, stub]
+    near = cKDTree(np.r_[slab, dome]).query(stub)[1]
+    assert (near[-5:] >= len(slab)).all()  # the stub's top is nearest to the dome
+    pr = parts(xyz, stacked=True, posts_z=(0.0, 2.0))
+    assert pr is not None
+    assert [len(c) for c in pr.children] == [len(slab) + len(stub), len(dome)]
+    assert np.array_equal(pr.children[1], np.arange(len(slab), len(slab) + len(dome)))
+    wall = rng.uniform(0, 1, (900, 3)) * [0.3, 2.0, 3.0] + [4.0, -1.0, 0.0]  # z 0-3 m, 2.5 m off the slab
+    pr = parts(np.r_[xyz, wall], stacked=True, posts_z=(0.0, 2.0))
+    assert pr is not None
+    dome_child = next(c for c in pr.children if len(slab) in c)
+    assert np.isin(np.arange(len(slab) + len(dome), len(xyz)), dome_child).any()  # the stub's top: with the dome
+    assert parts(xyz, stacked=True).children[0].size == len(slab) + near[near < len(slab)].size
+
+
 def test_a_root_nothing_splits_is_cut_into_parts_of_different_classes():
     """Only when HollowNet calls the parts different things, one a dome at least 2 m tall,
     and the whole no dome, minaret or other: a shaft and a chattri (minaret, dome) called

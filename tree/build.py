@@ -311,7 +311,7 @@ def build_tree(
     leaf_of = np.zeros(n, dtype=np.int64)
     is_leaf = [True]
     stack: list[tuple[int, IntArray]] = [(0, np.arange(n, dtype=np.int64))]
-    unjoined: set[int] = set()  # the rest of a posts split (:func:`_split_posts`)
+    unjoined: dict[int, tuple[float, float]] = {}  # the rest of a posts split: its posts' heights
 
     def _add_children(node: int, idx: IntArray, children: Any, sequence: int, e: FloatArray, x: float,
                       c_cls: IntArray, c_sc: FloatArray, c_pr: FloatArray) -> None:
@@ -404,7 +404,8 @@ def build_tree(
             c_cls, c_sc, c_pr = np.r_[c_cls, r_cls], np.r_[c_sc, r_sc], np.vstack([c_pr, r_pr])
         _add_children(node, idx, children, POST_SEQUENCE, np.full(5, np.nan), np.nan, c_cls, c_sc, c_pr)
         if len(children) > len(pillar):  # the rest: what the posts joined falls apart
-            unjoined.add(len(parent) - 1)
+            z = [pts[c, 2] for c in children[:len(pillar)]]
+            unjoined[len(parent) - 1] = (float(np.median([v.min() for v in z])), float(np.median([v.max() for v in z])))
         return True
 
     def _split_parts(node: int, idx: IntArray, pts: FloatArray) -> None:
@@ -431,7 +432,7 @@ def build_tree(
         if _is_flat(pts, params):
             continue
         if node in unjoined:  # the rest of a posts split, in its parts apart whatever they are
-            gap = parts(pts, params=params, stacked=True)
+            gap = parts(pts, params=params, stacked=True, posts_z=unjoined[node])
         else:
             gap = gaps(pts, params=params) if depth[node] == 0 else None
         if gap is not None:  # parts that do not touch: split, whatever the classifier says

@@ -79,7 +79,7 @@ PART_SEQUENCE = 6
 #: The node table's sequence id of a split into posts and what they carry (:func:`posts`).
 POST_SEQUENCE = 7
 #: A part of :func:`parts` holds at least this share of the node's points (smaller
-#: pieces go with the nearest part).
+#: pieces go with the nearest part; with ``stacked``, the nearest in height).
 PART_MIN_SHARE = 0.05
 #: Two parts of :func:`parts` whose x-y boxes overlap by more than this share of the
 #: smaller box's area are one (one stands on or inside the other).
@@ -562,7 +562,8 @@ def gaps(xyz: npt.ArrayLike, *, params: SequenceParams | None = None) -> Proposa
     return Proposal(sequence=GAP_SEQUENCE, children=children, cuts=cuts, curve=None)
 
 
-def parts(xyz: npt.ArrayLike, *, params: SequenceParams | None = None, stacked: bool = False) -> Proposal | None:
+def parts(xyz: npt.ArrayLike, *, params: SequenceParams | None = None, stacked: bool = False,
+          posts_z: tuple[float, float] | None = None) -> Proposal | None:
     """The node as its parts apart, side by side: the sets of points joined by steps of at
     most ``params.part_gap`` (DBSCAN with one sample, :func:`primitives.dbscan.dbscan_labels`)
     that hold at least :data:`PART_MIN_SHARE` of the node and ``params.min_points`` (every
@@ -574,7 +575,12 @@ def parts(xyz: npt.ArrayLike, *, params: SequenceParams | None = None, stacked: 
 
     ``stacked=True`` keeps parts that stand one on another apart too (no joining by
     x-y boxes): the rest of a frame whose posts were cut out (:func:`posts`), its slab
-    and dome above its platform.
+    and dome above its platform. ``posts_z`` is then the height range of those posts (the
+    median of their lowest and of their highest points): where no part reaches across its
+    middle height the rest is a frame's (a slab and a dome above the posts, a platform
+    under them; :func:`_is_frame`), and a smaller piece goes, whole, with the part nearest
+    to it in height (:func:`_by_height`), not point by point with the nearest part. A
+    tomb's walls beside the piers taken for posts reach across: their pieces do not move.
 
     Unlike :func:`gaps` this sees any direction (a chattri standing 0.25 m off a minaret's
     balcony, beside it and overlapping it in height), and it is not a split by itself:
@@ -602,7 +608,9 @@ def parts(xyz: npt.ArrayLike, *, params: SequenceParams | None = None, stacked: 
         return None
     part = np.searchsorted(big, label)
     small = ~np.isin(label, big)
-    if small.any():
+    if small.any() and stacked and posts_z is not None and _is_frame(a[:, 2], part, small, len(big), posts_z):
+        part[small] = _by_height(a, label, part, small, len(big))
+    elif small.any():
         _, j = cKDTree(a[~small]).query(a[small])
         part[small] = part[~small][j]
     if not stacked:
@@ -611,6 +619,50 @@ def parts(xyz: npt.ArrayLike, *, params: SequenceParams | None = None, stacked: 
         return None
     children = tuple(np.flatnonzero(part == k).astype(np.int64) for k in range(int(part.max()) + 1))
     return Proposal(sequence=PART_SEQUENCE, children=children, cuts=np.zeros(0), curve=None)
+
+
+def _is_frame(z: FloatArray, part: IntArray, small: npt.NDArray[np.bool_], n_parts: int,
+              posts_z: tuple[float, float]) -> bool:
+    """Whether no part (its points outside ``small``) reaches across the middle of the
+    posts' height range ``posts_z``: all the parts stand on the posts or under them."""
+    mid = 0.5 * (posts_z[0] + posts_z[1])
+    lo = np.full(n_parts, np.inf)
+    hi = np.full(n_parts, -np.inf)
+    np.minimum.at(lo, part[~small], z[~small])
+    np.maximum.at(hi, part[~small], z[~small])
+    return not bool(((lo < mid) & (hi > mid)).any())
+
+
+def _by_height(a: FloatArray, label: IntArray, part: IntArray, small: npt.NDArray[np.bool_],
+               n_parts: int) -> IntArray:
+    """The part of each small piece's points (``small``; ``label``: their pieces), when the
+    parts stand one on another: each piece whole with the part whose height range is
+    nearest to the piece's median height (0 inside it), of equals the one whose points come
+    nearest to the piece's. A post the posts missed goes with what it stands under, not with
+    the dome above it that its top point happens to be nearest to."""
+    z = a[:, 2]
+    lo = np.full(n_parts, np.inf)
+    hi = np.full(n_parts, -np.inf)
+    np.minimum.at(lo, part[~small], z[~small])
+    np.maximum.at(hi, part[~small], z[~small])
+    trees: dict[int, cKDTree] = {}
+    out = np.empty(int(small.sum()), dtype=part.dtype)
+    idx = np.flatnonzero(small)
+    order = np.argsort(label[idx], kind="stable")
+    _, starts = np.unique(label[idx][order], return_index=True)
+    for rows in np.split(order, starts[1:]):
+        mz = float(np.median(z[idx[rows]]))
+        gap = np.maximum(lo - mz, 0.0) + np.maximum(mz - hi, 0.0)
+        near = np.flatnonzero(gap <= gap.min() + 1e-9)
+        if len(near) > 1:
+            dist = []
+            for p in near.tolist():
+                if p not in trees:
+                    trees[p] = cKDTree(a[~small & (part == p)])
+                dist.append(float(trees[p].query(a[idx[rows]])[0].min()))
+            near = near[[int(np.argmin(dist))]]
+        out[rows] = near[0]
+    return out
 
 
 def _side_by_side(a: FloatArray, part: IntArray, n_parts: int) -> IntArray:
