@@ -22,7 +22,7 @@ and numeric packages (labels move with either; the JSON's ``machine``): the scri
 when they did not. The sum's paired interval (:func:`paired_interval`) is printed beside it.
 
 Run: ``python benchmarks/choose.py NAME [--set KEY=VALUE ...] [--seeds 0 1 2] [--rows ...]
-[--against tree-v45]``; ``--judge`` only reads the JSONs. A row's full run on 2 cores: about
+[--against tree-v47]``; ``--judge`` only reads the JSONs. A row's full run on 2 cores: about
 4 (0.5-2 M), 7 (4 M) and 2 x 8 (10 M) minutes, the dome batch 5; the first run of a row also
 scans its sites and runs their coarse stage. Validation seeds only: the test split is never
 used to choose (docs/generalize.md).
@@ -281,14 +281,14 @@ def judge(name: str, against: str, seeds: list[int]) -> tuple[str, list[str]]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("name", help="the variant's name in the JSON files (e.g. tree-v45)")
+    ap.add_argument("name", help="the variant's name in the JSON files (e.g. tree-v49)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                     help="a workflow override of the variant, repeatable")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], metavar="K", help="tree seeds (default 0 1 2)")
     ap.add_argument("--rows", nargs="+", choices=list(ROWS), default=list(ROWS), metavar="ROW",
                     help=f"rows to run (default all: {', '.join(ROWS)})")
-    ap.add_argument("--against", default="tree-v45", metavar="NAME",
-                    help="the default's run in this environment (default tree-v45, made with constraints.txt)")
+    ap.add_argument("--against", default="tree-v47", metavar="NAME",
+                    help="the default's run in this environment (default tree-v47, made with constraints.txt)")
     ap.add_argument("--work", type=Path, default=REPO / "out" / "choose", help="scans and stores, one folder per row")
     ap.add_argument("--force", action="store_true", help="rerun rows whose JSON exists")
     ap.add_argument("--judge", action="store_true", help="run nothing; judge the JSONs there are")

@@ -64,7 +64,8 @@ LATEST = {
 VAL_SEEDS = {
     "tree-v42": "`tree-v42`: arcade rows along circles, cells that partition a row",
     "rerun-v42": "`tree-v42` again, a fresh install at the versions of `constraints.txt` (`choose.py`)",
-    "tree-v45": "`tree-v45`: a band's ends from its plateau's median (default)",
+    "tree-v45": "`tree-v45`: a band's ends from its plateau's median",
+    "tree-v47": "`tree-v47`: a frame's small pieces go whole by height (default)",
 }
 ELEMENTS = ("arch", "dome", "minaret", "pillar")
 BEGIN = re.compile(r"<!-- generated: ([\w.-]+) -->\n")
