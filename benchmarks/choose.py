@@ -105,23 +105,35 @@ def three_rows(name: str, seed: int) -> tuple[float, float, float] | None:
     return f1(a), f1(b), f1(c, d)
 
 
-def _site_counts(name: str, seeds: list[int]) -> dict[tuple[int, str], dict[int, list[int]]] | None:
-    """Per seed and sum row, each site's (found, gt, matched, pred) over the four classes,
-    keyed by the site's seed; None where a JSON is missing or records no per-site totals."""
-    out: dict[tuple[int, str], dict[int, list[int]]] = {}
+def _per_site(name: str, seeds: list[int], rows: tuple[str, ...]) -> list[tuple[int, str, list[dict]]] | None:
+    """(tree seed, row, its sites) of each of ``rows`` at each seed; None where a JSON is
+    missing or records no per-site totals."""
+    out = []
     for s in seeds:
-        for r in SUM_ROWS:
+        for r in rows:
             f = result_path(r, name, s)
             if not f.is_file():
                 return None
             sites = json.loads(f.read_text()).get("sites", [])
             if not sites or any("totals" not in x for x in sites):
                 return None
-            key = (s, "val-10m" if r in ("val-density-10m", "val-10m-b") else r)
-            for x in sites:
-                t = x["totals"]
-                out.setdefault(key, {})[x["seed"]] = [sum(t[c][k] for c in ELEMENTS)
-                                                      for k in ("found", "gt", "matched", "pred")]
+            out.append((s, r, sites))
+    return out
+
+
+def _site_counts(name: str, seeds: list[int]) -> dict[tuple[int, str], dict[int, list[int]]] | None:
+    """Per seed and sum row, each site's (found, gt, matched, pred) over the four classes,
+    keyed by the site's seed; None where a JSON is missing or records no per-site totals."""
+    runs = _per_site(name, seeds, SUM_ROWS)
+    if runs is None:
+        return None
+    out: dict[tuple[int, str], dict[int, list[int]]] = {}
+    for s, r, sites in runs:
+        key = (s, "val-10m" if r in ("val-density-10m", "val-10m-b") else r)
+        for x in sites:
+            t = x["totals"]
+            out.setdefault(key, {})[x["seed"]] = [sum(t[c][k] for c in ELEMENTS)
+                                                  for k in ("found", "gt", "matched", "pred")]
     return out
 
 
@@ -160,19 +172,15 @@ def _class_site_counts(name: str, seeds: list[int]) -> dict[int, dict[int, objec
     records no per-site totals."""
     import numpy as np
 
+    runs = _per_site(name, seeds, CLASS_ROWS)
+    if runs is None:
+        return None
     out: dict[int, dict[int, np.ndarray]] = {}
-    for s in seeds:
-        for r in CLASS_ROWS:
-            f = result_path(r, name, s)
-            if not f.is_file():
-                return None
-            sites = json.loads(f.read_text()).get("sites", [])
-            if not sites or any("totals" not in x for x in sites):
-                return None
-            for x in sites:
-                c = np.asarray([[x["totals"][e][k] for k in ("found", "gt", "pred")] for e in ELEMENTS], float)
-                site = out.setdefault(s, {})
-                site[x["seed"]] = site.get(x["seed"], 0) + c
+    for s, _, sites in runs:
+        for x in sites:
+            c = np.asarray([[x["totals"][e][k] for k in ("found", "gt", "pred")] for e in ELEMENTS], float)
+            site = out.setdefault(s, {})
+            site[x["seed"]] = site.get(x["seed"], 0) + c
     return out
 
 
