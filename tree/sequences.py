@@ -79,7 +79,7 @@ PART_SEQUENCE = 6
 #: The node table's sequence id of a split into posts and what they carry (:func:`posts`).
 POST_SEQUENCE = 7
 #: A part of :func:`parts` holds at least this share of the node's points (smaller
-#: pieces go with the nearest part; with ``stacked``, the nearest in height).
+#: pieces go with the nearest part; in a frame's rest, :func:`_is_frame`, the nearest in height).
 PART_MIN_SHARE = 0.05
 #: Two parts of :func:`parts` whose x-y boxes overlap by more than this share of the
 #: smaller box's area are one (one stands on or inside the other).
