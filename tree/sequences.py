@@ -626,11 +626,18 @@ def _is_frame(z: FloatArray, part: IntArray, small: npt.NDArray[np.bool_], n_par
     """Whether no part (its points outside ``small``) reaches across the middle of the
     posts' height range ``posts_z``: all the parts stand on the posts or under them."""
     mid = 0.5 * (posts_z[0] + posts_z[1])
+    lo, hi = _part_heights(z, part, small, n_parts)
+    return not bool(((lo < mid) & (hi > mid)).any())
+
+
+def _part_heights(z: FloatArray, part: IntArray, small: npt.NDArray[np.bool_], n_parts: int
+                  ) -> tuple[FloatArray, FloatArray]:
+    """Each part's lowest and highest point (its points outside ``small``)."""
     lo = np.full(n_parts, np.inf)
     hi = np.full(n_parts, -np.inf)
     np.minimum.at(lo, part[~small], z[~small])
     np.maximum.at(hi, part[~small], z[~small])
-    return not bool(((lo < mid) & (hi > mid)).any())
+    return lo, hi
 
 
 def _by_height(a: FloatArray, label: IntArray, part: IntArray, small: npt.NDArray[np.bool_],
@@ -641,10 +648,7 @@ def _by_height(a: FloatArray, label: IntArray, part: IntArray, small: npt.NDArra
     nearest to the piece's. A post the posts missed goes with what it stands under, not with
     the dome above it that its top point happens to be nearest to."""
     z = a[:, 2]
-    lo = np.full(n_parts, np.inf)
-    hi = np.full(n_parts, -np.inf)
-    np.minimum.at(lo, part[~small], z[~small])
-    np.maximum.at(hi, part[~small], z[~small])
+    lo, hi = _part_heights(z, part, small, n_parts)
     trees: dict[int, cKDTree] = {}
     out = np.empty(int(small.sum()), dtype=part.dtype)
     idx = np.flatnonzero(small)
