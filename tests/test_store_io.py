@@ -191,3 +191,27 @@ def test_records_skip_a_unit_killed_before_its_record(store, tmp_path, recwarn):
         "3": {"params_hash": "abc", "n_points": 5}, "4": {"params_hash": "abc", "n_points": 7}}
     assert store.records("tree") == {}
     assert not [w for w in recwarn if "not recognized" in str(w.message)]
+
+
+def test_a_units_arrays_carry_zarrs_own_metadata_for_their_shape_and_dtype(store):
+    """``write_unit`` builds each array's metadata from one in-memory template per dtype and
+    rank: what it writes must be what Zarr's own ``create_array`` writes for that shape."""
+    import zarr
+    from zarr.storage import MemoryStore
+
+    from hollowtree.tiling.store import _COMPRESSOR
+
+    arrays = {"f": np.linspace(0, 1, 30).reshape(10, 3), "b": np.array([True, False, True]),
+              "u": np.arange(7, dtype=np.uint16), "e": np.zeros((0, 2), np.float32)}
+    store.write_unit("tiles/9", arrays)
+    root = zarr.open_group(store.url, mode="r")
+    for name, values in arrays.items():
+        own = zarr.create_array(store=MemoryStore(), shape=values.shape, dtype=values.dtype,
+                                chunks=(max(1, len(values)),) + values.shape[1:], compressors=_COMPRESSOR,
+                                fill_value=0)
+        assert root[f"tiles/9/{name}"].metadata.to_dict() == own.metadata.to_dict(), name
+    got = store.read_unit("tiles/9", ["u", "f"])
+    assert list(got) == ["u", "f"]
+    np.testing.assert_array_equal(got["f"], arrays["f"])
+    np.testing.assert_array_equal(store.read_unit("tiles/9")["b"], arrays["b"])
+    assert store.read_unit("tiles/9")["e"].shape == (0, 2)

@@ -16,6 +16,8 @@ only recorded units.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
+import functools
 import json
 import logging
 import os
@@ -33,6 +35,8 @@ from numcodecs import Blosc
 from zarr.codecs import BloscCodec, BytesCodec
 from zarr.core.array import AsyncArray
 from zarr.core.buffer import default_buffer_prototype
+from zarr.core.chunk_grids import RegularChunkGrid
+from zarr.core.metadata import ArrayV3Metadata
 from zarr.core.sync import sync
 from zarr.storage import MemoryStore, StorePath
 
@@ -75,17 +79,32 @@ def _new_array(group: zarr.Group, name: str, *, shape: tuple[int, ...], dtype: A
     its chunk included (``benchmarks/bench_store.py``), against this one object and the
     chunk. The metadata is Zarr's own for these settings (an array made in memory).
     """
-    template = zarr.create_array(store=MemoryStore(), shape=shape, dtype=dtype, chunks=chunks,
-                                 compressors=_COMPRESSOR, fill_value=0)
-    path = f"{group.path}/{name}" if group.path else name
-    store_path = StorePath(group.store_path.store, path)
-    docs = template.metadata.to_buffer_dict(default_buffer_prototype())
+    template = _template(shape=shape, dtype=dtype, chunks=chunks)
+    return zarr.Array(sync(_put_array(group.store_path / name, template)))
 
-    async def put_all() -> None:
-        await asyncio.gather(*((store_path / key).set(value) for key, value in docs.items()))
 
-    sync(put_all())
-    return zarr.Array(AsyncArray(template.metadata, store_path, config=template._async_array.config))
+def _template(*, shape: tuple[int, ...], dtype: Any, chunks: tuple[int, ...]) -> tuple[ArrayV3Metadata, Any]:
+    """The metadata (and array config) of an array with the store's settings: Zarr's own,
+    from an array made in memory once per dtype and rank, at this shape and chunking."""
+    base, config = _base_template(np.dtype(dtype).str, len(shape))
+    meta = dataclasses.replace(base, shape=tuple(shape), chunk_grid=RegularChunkGrid(chunk_shape=tuple(chunks)))
+    return meta, config
+
+
+@functools.lru_cache(maxsize=64)
+def _base_template(dtype: str, ndim: int) -> tuple[ArrayV3Metadata, Any]:
+    arr = zarr.create_array(store=MemoryStore(), shape=(1,) * ndim, dtype=np.dtype(dtype), chunks=(1,) * ndim,
+                            compressors=_COMPRESSOR, fill_value=0)
+    assert isinstance(arr.metadata, ArrayV3Metadata)
+    return arr.metadata, arr._async_array.config
+
+
+async def _put_array(store_path: StorePath, template: tuple[ArrayV3Metadata, Any]) -> AsyncArray[Any]:
+    """Write ``template``'s metadata at ``store_path``; the array there."""
+    meta, config = template
+    docs = meta.to_buffer_dict(default_buffer_prototype())
+    await asyncio.gather(*((store_path / key).set(value) for key, value in docs.items()))
+    return AsyncArray(meta, store_path, config=config)
 
 
 def _is_url(url: str) -> bool:
@@ -206,16 +225,21 @@ class RunStore:
     def write_unit(self, group: str, arrays: Mapping[str, npt.NDArray[Any]]) -> None:
         """Write ``arrays`` into group path ``group`` (replacing what was there). An array
         shorter than :data:`CHUNK_POINTS` rows is one chunk of its rows: a chunk is encoded
-        whole, its fill too."""
+        whole, its fill too. The old arrays' removal, the new arrays' metadata and their
+        chunks each go to the store as one batch of concurrent requests."""
         g = self._require_group(group)
-        for name in list(g.array_keys()):
-            del g[name]
-        for name, values in arrays.items():
-            values = np.ascontiguousarray(values)
-            arr = _new_array(g, name, shape=values.shape, dtype=values.dtype,
-                             chunks=(max(1, min(CHUNK_POINTS, len(values))),) + values.shape[1:])
-            if values.size:
-                arr[...] = values
+        values = {name: np.ascontiguousarray(v) for name, v in arrays.items()}
+        templates = [_template(shape=v.shape, dtype=v.dtype, chunks=(max(1, min(CHUNK_POINTS, len(v))),) + v.shape[1:])
+                     for v in values.values()]
+
+        async def write() -> None:
+            ag = g._async_group
+            old = [name async for name in ag.array_keys()]
+            await asyncio.gather(*(ag.delitem(name) for name in old))
+            new = await asyncio.gather(*(_put_array(ag.store_path / name, t) for name, t in zip(values, templates, strict=True)))
+            await asyncio.gather(*(arr.setitem(..., v) for arr, v in zip(new, values.values(), strict=True) if v.size))
+
+        sync(write())
 
     def unit_writer(self, group: str, *, n_rows: int | None = None) -> _UnitWriter:
         """An appending writer for group path ``group`` (its old arrays are removed).
@@ -229,10 +253,26 @@ class RunStore:
         return _UnitWriter(g, n_rows=n_rows)
 
     def read_unit(self, group: str, names: Iterable[str] | None = None) -> dict[str, np.ndarray]:
-        """Read arrays of group path ``group`` (all, or ``names``)."""
+        """Read arrays of group path ``group`` (all, or ``names``), as one batch of
+        concurrent requests."""
         g = self._root[group]
-        keys = list(g.array_keys()) if names is None else list(names)
-        return {k: g[k][...] for k in keys}
+        keys = None if names is None else list(names)
+
+        async def read() -> dict[str, np.ndarray]:
+            ag = g._async_group
+            nonlocal keys
+            if keys is None:
+                keys = [name async for name in ag.array_keys()]
+
+            async def one(name: str) -> Any:
+                arr = await ag.getitem(name)
+                if not isinstance(arr, AsyncArray):
+                    raise KeyError(f"{group}/{name} is a group, not an array")
+                return await arr.getitem(...)
+
+            return dict(zip(keys, await asyncio.gather(*(one(k) for k in keys)), strict=True))
+
+        return sync(read())
 
     def unit_arrays(self, group: str) -> list[str]:
         """Names of the arrays in group path ``group``."""
