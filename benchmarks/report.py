@@ -38,22 +38,22 @@ RESULTS = REPO / "benchmarks" / "results"
 #: The latest run of each kind of element-recall result (``bench_generalize.py --json``).
 #: These are the figures of docs/generalize.md; edit the file names when a newer run replaces one.
 LATEST = {
-    "test": "generalize-test-tree-v45.json",
+    "test": "generalize-test-tree-v47.json",
     "test-5m": "generalize-test-5m-gen-v3.json",
-    "val-4m": "generalize-val-4m-tree-v45.json",
-    "val-1m": "generalize-val-density-1m-tree-v45.json",
-    "val-10m": "generalize-val-density-10m-tree-v45.json",
-    "val-3m": "generalize-val-density-3m-tree-v45.json",
+    "val-4m": "generalize-val-4m-tree-v47.json",
+    "val-1m": "generalize-val-density-1m-tree-v47.json",
+    "val-10m": "generalize-val-density-10m-tree-v47.json",
+    "val-3m": "generalize-val-density-3m-tree-v47.json",
     # the second validation batch (seeds 100 014-100 027) at the hidden scenes' density
     "val-5m-b": "generalize-val-5m-b-tree-v39.json",
     # the dome batch: the next 6 validation seeds of each family with domes (100 028-100 068)
-    "val-domes": "generalize-val-domes-tree-v45.json",
+    "val-domes": "generalize-val-domes-tree-v47.json",
     # diagnose_generalize.py --density over the 1 M, 3 M and 10 M rows (tree seed 0)
     "density": "generalize-val-density-visible-tree-v45.json",
-    "val": "generalize-val-tree-v45.json",
+    "val": "generalize-val-tree-v47.json",
     # the latest run with the paper's energy path (other runs pass --no-energy; it runs with
     # tree.verify=false, so tree-v25 and tree-v26 did not change it)
-    "test-energy": "generalize-test-tree-v45.json",
+    "test-energy": "generalize-test-tree-v47.json",
     # docs/results.md: the paper's five sites, a report set (hollowtree evaluate --seeds 3)
     "five-sites": "five-sites-10m-tree-v39.json",
 }
