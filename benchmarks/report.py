@@ -49,7 +49,7 @@ LATEST = {
     # the dome batch: the next 6 validation seeds of each family with domes (100 028-100 068)
     "val-domes": "generalize-val-domes-tree-v47.json",
     # diagnose_generalize.py --density over the 1 M, 3 M and 10 M rows (tree seed 0)
-    "density": "generalize-val-density-visible-tree-v45.json",
+    "density": "generalize-val-density-visible-tree-v47.json",
     "val": "generalize-val-tree-v47.json",
     # the latest run with the paper's energy path (other runs pass --no-energy; it runs with
     # tree.verify=false, so tree-v25 and tree-v26 did not change it)
