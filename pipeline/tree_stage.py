@@ -57,7 +57,7 @@ SPREAD_STAGE = "tree.spread"
 #: Version of the tree's algorithm (tree/): part of the stage's parameters hash and of the
 #: workflow parameters a run records, so a store made by an older version is redone. What
 #: each version changed is in CHANGELOG.md (and git).
-TREE_ALGORITHM = "tree-v49"
+TREE_ALGORITHM = "tree-v47"
 #: Points sampled from each wall instance for the frames (tree/frames.py): a pier's face
 #: beside a bay's jamb is a strip a few tenths of a metre wide in a facade's wall.
 WALL_SAMPLE_POINTS = 16384
@@ -175,27 +175,10 @@ def group_starts(store: RunStore) -> np.ndarray:
 
 
 def _group_tree(pts: np.ndarray, s: int, params: TreeStageParams, clf: Any, ground_level: float | None,
-                n_inst: int, patch: np.ndarray | None = None) -> tuple[dict[str, np.ndarray], dict[str, list[Any]], int]:
+                n_inst: int) -> tuple[dict[str, np.ndarray], dict[str, list[Any]], int]:
     """The tree of one element group (its points ``pts``, store-local metres; ``s``: its
     first segment, 0-based): per-point leaf, class, instance (numbered from ``n_inst + 1``)
-    and score, the node table's columns and the new instance count.
-
-    ``patch``: the points of its segments that are patches of the ground
-    (:func:`tree.ground.ground_patches`); the tree is built without them, and they are
-    ground (the group's ground instance, the root's leaf id, score 1)."""
-    if patch is not None and patch.any() and (~patch).sum() >= 2:
-        values, cols, n_inst = _group_tree(pts[~patch], s, params, clf, ground_level, n_inst)
-        out = {k: np.zeros(len(pts), v.dtype) for k, v in values.items()}
-        for k, v in values.items():
-            out[k][~patch] = v
-        ground = values["instance"][values["class"] == int(ClassId.GROUND)]
-        if not len(ground) or ground.max() <= 0:  # the group's ground instance, new where it had none
-            n_inst += 1
-            ground = np.array([n_inst])
-        out["class"][patch] = int(ClassId.GROUND)
-        out["instance"][patch] = ground.max()
-        out["score"][patch] = 1.0
-        return out, cols, n_inst
+    and score, the node table's columns and the new instance count."""
     from hollowtree.tree.build import build_tree
     from hollowtree.tree.ground import ground_or_roof
     from hollowtree.tree.split import load_split_model
@@ -261,8 +244,7 @@ def _group_tree(pts: np.ndarray, s: int, params: TreeStageParams, clf: Any, grou
 
 
 def _sampled_group_tree(store: RunStore, b: int, lo: int, hi: int, s: int, scale: np.ndarray,
-                        params: TreeStageParams, clf: Any, ground_level: float | None,
-                        seg_patch: tuple[np.ndarray, np.ndarray] | None = None
+                        params: TreeStageParams, clf: Any, ground_level: float | None
                         ) -> tuple[dict[str, list[Any]], int, int]:
     """The tree of one element group above ``max_group_points``, in bounded memory: built
     on a seeded random sample of about ``max_group_points`` of its points (read chunk by
@@ -270,24 +252,17 @@ def _sampled_group_tree(store: RunStore, b: int, lo: int, hi: int, s: int, scale
     made at the group's length: :func:`spread_labels` units then give every point the
     labels of its nearest sampled point and count the leaves' points (the node table's
     ``n_points``, set by :func:`_spread_counts`; its bounding boxes are the sample's).
-    Returns the node columns, the instance count and the sample's size. ``seg_patch``: the
-    CSR offsets of the group's segments and which are ground patches."""
+    Returns the node columns, the instance count and the sample's size."""
     n = hi - lo
     step = max(params.max_group_points, 1_000_000)
     rng = np.random.default_rng(np.random.SeedSequence([params.seed, s + 1, 1]))
     keep = params.max_group_points / n
-    parts, rows = [], []
+    parts = []
     for a in range(lo, hi, step):
         chunk = store.read_slice("coarse/csr/xyz", a, min(a + step, hi))
-        sel = rng.random(len(chunk)) < keep
-        parts.append(chunk[sel])
-        rows.append(a + np.flatnonzero(sel))
+        parts.append(chunk[rng.random(len(chunk)) < keep])
     sample = np.concatenate(parts).astype(np.float64) * scale
-    patch = None
-    if seg_patch is not None and len(seg_patch[1]) > 1:  # a group of one segment is what it is
-        offs, flags = seg_patch
-        patch = flags[np.searchsorted(offs, np.concatenate(rows), side="right") - 1]
-    values, cols, n_inst = _group_tree(sample, s, params, clf, ground_level, 0, patch)
+    values, cols, n_inst = _group_tree(sample, s, params, clf, ground_level, 0)
     store.write_unit(f"tree/sampled/{b}", {"xyz": sample, **values})
     for k, v in values.items():
         store.create_array(f"tree/batches/{b}/{k}", shape=(n,), dtype=v.dtype)
@@ -354,8 +329,7 @@ def _write_samples(store: RunStore, b: int, xyz: np.ndarray, values: dict[str, n
 
 
 def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
-               ground: np.ndarray | None = None, starts: list[int] | None = None,
-               patches: np.ndarray | None = None) -> dict[str, Any]:
+               ground: np.ndarray | None = None, starts: list[int] | None = None) -> dict[str, Any]:
     """Dask task: the trees of global segments ``segs[0] + 1 .. segs[1]`` (one batch).
 
     ``starts``: the 0-based first segment of every element group in the batch (one tree
@@ -363,9 +337,7 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
     ``ground``: the local ground level of each of these segments, in the store's
     coordinates (``tree.ground.ground_levels``); used when ``roof_min_height`` or ``other_max_base`` is set
     (a group takes its segments' lowest). A batch of one group above ``max_group_points``
-    is built on a sample of it (:func:`_sampled_group_tree`). ``patches``: which of these
-    segments are patches of the ground (:func:`tree.ground.ground_patches`), left out of
-    their group's tree.
+    is built on a sample of it (:func:`_sampled_group_tree`).
     """
     from hollowtree.hollownet.predict import Classifier
 
@@ -385,9 +357,8 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
 
     sampled = 0
     if len(bounds) == 2 and params.max_group_points and n > params.max_group_points:
-        cols, n_inst, sampled = _sampled_group_tree(
-            store, b, lo, hi, segs[0], scale, params, clf, ground_level(segs[0], segs[1]),
-            None if patches is None else (offsets[segs[0]:segs[1] + 1].astype(np.int64), np.asarray(patches, bool)))
+        cols, n_inst, sampled = _sampled_group_tree(store, b, lo, hi, segs[0], scale, params, clf,
+                                                    ground_level(segs[0], segs[1]))
         cols["n_points"] = [0] * len(cols["node_id"])  # the spread units count them
     else:
         xyz = store.read_slice("coarse/csr/xyz", lo, hi).astype(np.float64) * scale
@@ -399,12 +370,7 @@ def tree_batch(url: str, b: int, segs: tuple[int, int], cfg: dict[str, Any],
         for s, s_end in zip(bounds[:-1], bounds[1:], strict=True):
             a, z = int(offsets[s]) - lo, int(offsets[s_end]) - lo
             groups.append((a, z, s))
-            patch = None
-            if patches is not None and s_end - s > 1:  # a group of one segment is what it is
-                patch = np.repeat(np.asarray(patches[s - segs[0]:s_end - segs[0]], bool),
-                                  np.diff(offsets[s:s_end + 1]).astype(np.int64))
-            values, group_cols, n_inst = _group_tree(xyz[a:z], s, params, clf, ground_level(s, s_end), n_inst,
-                                                     patch)
+            values, group_cols, n_inst = _group_tree(xyz[a:z], s, params, clf, ground_level(s, s_end), n_inst)
             for k, v in values.items():
                 out[k][a:z] = v
             for c in _NODE_COLUMNS:
@@ -439,15 +405,7 @@ class TreeReport:
 def _ground_levels(store: RunStore) -> np.ndarray:
     """Local ground level of every global segment (row g-1 for segment g), in the
     store's coordinates, from the coarse segment table's bounding boxes."""
-    return _ground_and_patches(store)[0]
-
-
-def _ground_and_patches(store: RunStore) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_ground_levels` and which segments are patches of the ground
-    (:func:`tree.ground.ground_patches`)."""
-    import json
-
-    from hollowtree.tree.ground import ground_levels, ground_patches
+    from hollowtree.tree.ground import ground_levels
 
     t = store.read_table("coarse/segments.parquet")
     cols = {c: np.asarray(t.column(c).to_numpy(), dtype=np.float64)
@@ -455,10 +413,7 @@ def _ground_and_patches(store: RunStore) -> tuple[np.ndarray, np.ndarray]:
     order = np.argsort(cols["segment"], kind="stable")
     bbox = np.stack([cols[c][order] for c in ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax")], axis=1)
     z0 = float(store.attrs["coords"]["offset"][2])
-    ground = ground_levels(bbox, n_points=cols["n_points"][order], min_points=200)
-    kinds = [t.column("kind")[int(i)].as_py() for i in order]
-    params = [json.loads(t.column("params")[int(i)].as_py() or "[]") for i in order]
-    return ground - z0, ground_patches(kinds, params, bbox[:, 5], ground)
+    return ground_levels(bbox, n_points=cols["n_points"][order], min_points=200) - z0
 
 
 def run_tree(url: str, params: TreeStageParams, *, runner: Any, device: str = "cpu") -> TreeReport:
@@ -493,7 +448,8 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any, device: str = "c
     done = {k: v for k, v in stage.done().items() if k.isdigit() and int(k) < len(batches)
             and v.get("csr") == [int(offsets[batches[int(k)][0]]), int(offsets[batches[int(k)][1]])]}
     todo = [b for b in range(len(batches)) if str(b) not in done]
-    ground, patches = _ground_and_patches(store) if todo else (None, None)
+    ground = _ground_levels(store) if todo and (params.roof_min_height is not None
+                                                or params.other_max_base is not None) else None
 
     def starts_in(b: int) -> list[int]:
         lo, hi = batches[b]
@@ -504,11 +460,8 @@ def run_tree(url: str, params: TreeStageParams, *, runner: Any, device: str = "c
     # above its first (what its heap and torch kept of the earlier ones).
     task = tree_batch if device != "cpu" else in_child(tree_batch, functools.partial(_load_classifier, params.weights))
     results = runner(task,
-                     [(url, b, batches[b], cfg,
-                       None if ground is None or (params.roof_min_height is None and params.other_max_base is None)
-                       else ground[slice(*batches[b])],
-                       starts_in(b), None if patches is None else patches[slice(*batches[b])]) for b in todo],
-                     "tree: batches")
+                     [(url, b, batches[b], cfg, None if ground is None else ground[slice(*batches[b])],
+                       starts_in(b)) for b in todo], "tree: batches")
     for b, info in zip(todo, results, strict=True):
         done[str(b)] = info
     infos = [done[str(b)] for b in range(len(batches))]

@@ -784,28 +784,3 @@ def test_a_storeys_band_is_cut_into_bays_before_storeys(monkeypatch):
 
     r = build_tree(xyz, _Always(int(ClassId.WALL)), split=NoBays(), rng=0)
     assert [len(r.nodes.children(b)) for b in r.nodes.children(0)] == [2, 2]
-
-
-def test_patches_of_the_ground_are_left_out_of_their_groups_tree():
-    """The tree is built on the rest and its labels are those of a tree of the rest alone;
-    the patch is ground, in the group's ground instance (a new one here: nothing else of the
-    group is ground), its leaf the root's."""
-    from hollowtree.pipeline.tree_stage import TreeStageParams, _group_tree
-
-    rng = np.random.default_rng(0)
-    arch = rng.uniform(0, 1, (600, 3)) * [0.5, 3.0, 4.0]
-    floor = np.c_[rng.uniform(0.5, 3.0, (300, 2)), np.zeros(300)]
-    xyz = np.r_[arch, floor]
-    patch = np.r_[np.zeros(600, bool), np.ones(300, bool)]
-    params = TreeStageParams(max_depth=2, roof_min_height=None)
-    got, cols, n = _group_tree(xyz, 0, params, _Always(int(ClassId.ARCH)), None, 4, patch)
-    alone, cols_alone, n_alone = _group_tree(arch, 0, params, _Always(int(ClassId.ARCH)), None, 4)
-    for k in alone:
-        np.testing.assert_array_equal(got[k][:600], alone[k])
-    np.testing.assert_equal(cols, cols_alone)
-    assert (got["class"][600:] == int(ClassId.GROUND)).all()
-    assert (got["leaf"][600:] == 0).all()
-    assert n == n_alone + 1
-    assert (got["instance"][600:] == n).all()
-    whole, _, _ = _group_tree(xyz, 0, params, _Always(int(ClassId.ARCH)), None, 4)
-    assert (whole["class"][600:] == int(ClassId.ARCH)).all()  # without the mask, the floor is the arch's

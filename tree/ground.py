@@ -17,13 +17,7 @@ import numpy.typing as npt
 
 from hollowtree.classes import ClassId
 
-__all__ = ["GROUND_PATCH_HEIGHT", "GROUND_PATCH_TILT", "ground_levels", "ground_or_roof", "ground_patches"]
-
-#: :func:`ground_patches`: a horizontal plane segment whose top is at most this far above
-#: the local ground (metres) ...
-GROUND_PATCH_HEIGHT = 0.3
-#: ... and whose normal is within this many degrees of vertical is a patch of the ground.
-GROUND_PATCH_TILT = 10.0
+__all__ = ["ground_levels", "ground_or_roof"]
 
 
 def ground_levels(bbox: npt.ArrayLike, *, cell: float = 10.0, min_points: npt.ArrayLike | None = None,
@@ -106,27 +100,3 @@ def ground_or_roof(class_id: npt.NDArray[np.uint8], z: npt.NDArray[np.floating],
     roof = (median - ground) >= min_height
     out[sel] = np.where(roof[inv], np.uint8(ClassId.ROOF), np.uint8(ClassId.GROUND))
     return out
-
-
-def ground_patches(kinds: list[str], params: list[list[float]], zmax: npt.ArrayLike, ground: npt.ArrayLike, *,
-                   height: float = GROUND_PATCH_HEIGHT, tilt: float = GROUND_PATCH_TILT) -> npt.NDArray[np.bool_]:
-    """Which coarse segments are patches of the ground: planes (``params`` ``nx, ny, nz,
-    d``) within ``tilt`` degrees of horizontal whose top (``zmax``) is at most ``height``
-    above their local ground (``ground``, :func:`ground_levels`).
-
-    The ground plane's inliers fall apart where walls and piers shadow it; a piece under an
-    arcade is a segment of its own that touches the arches and joins their element group
-    (large planes stay alone, small ones do not). The tree then sees an arch with a strip of
-    floor around it, which HollowNet (the shape scaled to its grid) calls other or dome.
-
-    >>> ground_patches(["plane", "plane", "plane", "cylinder"],
-    ...                [[0, 0, 1, -100.0], [0, 0.6, 0.8, 0.0], [0, 0, 1, -102.0], [0, 0, 1, 0, 0, 1, 1.0]],
-    ...                [100.02, 100.5, 102.0, 100.3], [100.0, 100.0, 100.0, 100.0]).tolist()
-    [True, False, False, False]
-    """
-    z = np.asarray(zmax, dtype=np.float64).reshape(-1)
-    g = np.asarray(ground, dtype=np.float64).reshape(-1)
-    cos_tilt = float(np.cos(np.radians(tilt)))
-    flat = np.asarray([k == "plane" and len(p) >= 3 and abs(float(p[2])) >= cos_tilt * float(np.linalg.norm(p[:3]))
-                       for k, p in zip(kinds, params, strict=True)], dtype=bool)
-    return flat & (z - g <= height)
