@@ -256,13 +256,10 @@ class RunStore:
         """Read arrays of group path ``group`` (all, or ``names``), as one batch of
         concurrent requests."""
         g = self._root[group]
-        keys = None if names is None else list(names)
 
         async def read() -> dict[str, np.ndarray]:
             ag = g._async_group
-            nonlocal keys
-            if keys is None:
-                keys = [name async for name in ag.array_keys()]
+            keys = [name async for name in ag.array_keys()] if names is None else list(names)
 
             async def one(name: str) -> Any:
                 arr = await ag.getitem(name)
