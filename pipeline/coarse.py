@@ -383,9 +383,8 @@ FALLBACK_EPS = 0.3
 # coarse-v6 (v5 named a trial that was dropped): a block whose context holds more than
 # CONTEXT_FACTOR x block_points is cut again (block_inputs); coarse-v7: a small free
 # cluster that spans free_min_cells cells is a segment; coarse-v8: set in a wall by the
-# segment's outline (primitives.group.OUTLINE_DIRECTIONS), not its bounding box; coarse-v9:
-# a segment set in two parallel walls (a thick wall's faces) is set in neither.
-COARSE_ALGORITHM = "coarse-v9"
+# segment's outline (primitives.group.OUTLINE_DIRECTIONS), not its bounding box.
+COARSE_ALGORITHM = "coarse-v8"
 SPACING_WINDOWS = 1024
 WINDOW_ROWS = 1024
 

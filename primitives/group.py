@@ -436,24 +436,6 @@ STRIP_FACTOR = 3.0
 #: A large plane takes the segments set in it only when it is a wall: the z component of
 #: its unit normal at most this (about 17 degrees from vertical).
 SET_IN_MAX_NZ = 0.3
-#: Two walls a segment is set in are the faces of one wall when their unit normals meet at
-#: most this cosine's angle (about 18 degrees).
-THROUGH_MIN_COS = 0.95
-#: ... and their planes at least this far apart, metres: two pieces of one face (a facade
-#: cut at a door) lie within RANSAC's epsilon of one plane, a wall's faces its thickness apart.
-THROUGH_MIN_GAP = 0.25
-
-
-def _faces_of_one_wall(fits: np.ndarray) -> bool:
-    """Whether two of the planes ``fits`` (rows ``n_x, n_y, n_z, d`` with unit normals) are
-    parallel (:data:`THROUGH_MIN_COS`) and at least :data:`THROUGH_MIN_GAP` apart: the two
-    faces of one wall, not two pieces of one face."""
-    for i in range(len(fits)):
-        for j in range(i + 1, len(fits)):
-            c = float(fits[i, :3] @ fits[j, :3])
-            if abs(c) >= THROUGH_MIN_COS and abs(fits[i, 3] - np.sign(c) * fits[j, 3]) >= THROUGH_MIN_GAP:
-                return True
-    return False
 
 
 def set_in_walls(ra: np.ndarray, rb: np.ndarray, cnt: np.ndarray, large: np.ndarray, plane: dict[int, Any],
@@ -476,7 +458,6 @@ def set_in_walls(ra: np.ndarray, rb: np.ndarray, cnt: np.ndarray, large: np.ndar
         by_wall.setdefault(w, []).append(s_)
     shift = np.r_[offset, offset]
     best: dict[int, tuple[int, int]] = {}
-    walls_of: dict[int, list[np.ndarray]] = {}
     for w, smalls in sorted(by_wall.items()):
         fit = json.loads(plane[w]) if isinstance(plane[w], str) else plane[w]
         if len(fit) < 4:
@@ -490,11 +471,6 @@ def set_in_walls(ra: np.ndarray, rb: np.ndarray, cnt: np.ndarray, large: np.ndar
         inside = set_in_plane(boxes, normal, float(fit[3]), np.asarray(box[w], dtype=np.float64) - shift, tol,
                               outlines=outlines)
         for s_, ok in zip(smalls, inside.tolist(), strict=True):
-            if ok:
-                walls_of.setdefault(s_, []).append(np.r_[normal, float(fit[3])] / float(np.linalg.norm(normal)))
             if ok and count[(s_, w)] > best.get(s_, (-1, -1))[0]:
                 best[s_] = (count[(s_, w)], w)
-    # Set in two parallel walls: between the two faces of one thick wall (an arcade's
-    # front and back), so an opening through it, not a relief on one face.
-    through = {s_ for s_, fits in walls_of.items() if len(fits) > 1 and _faces_of_one_wall(np.vstack(fits))}
-    return {s_: w for s_, (_, w) in sorted(best.items()) if s_ not in through}
+    return {s_: w for s_, (_, w) in sorted(best.items())}

@@ -15,7 +15,6 @@ from hollowtree.primitives.group import (
     segment_contacts,
     segment_contacts_chunked,
     set_in_plane,
-    set_in_walls,
     stacked_pairs,
 )
 
@@ -139,29 +138,6 @@ def test_set_in_does_not_turn_with_the_scan():
         box_says.append(set_in_plane(boxes, normal, 0.0, wall_box, 1.5).tolist())
     assert box_says[0] == [True, True, False]  # along the axes the box was right
     assert any(b != [True, True, False] for b in box_says)  # what the outline fixes
-
-
-def test_a_segment_between_a_walls_two_faces_is_set_in_neither():
-    """An arcade's intrados piece touches the wall's front face (y = 0) and its back face
-    (y = 1.4): an opening through the wall, set in neither face, so it can join the other
-    pieces of its arcade; a relief on one face, a jamb between two pieces of one face (the
-    facade cut at a door) and a pilaster at a corner of two walls are set in a wall."""
-    front, back, right, door_left, door_right = 0, 1, 2, 3, 4
-    plane = {front: [0.0, 1.0, 0.0, 0.0], back: [0.0, -1.0, 0.0, 1.4], right: [1.0, 0.0, 0.0, -30.0],
-             door_left: [0.0, 1.0, 0.0, -40.0], door_right: [0.0, 1.0, 0.0, -40.01]}
-    box = {front: [0, -0.02, 0, 30, 0.02, 8], back: [0, 1.38, 0, 30, 1.42, 8], right: [29.98, 0, 0, 30.02, 20, 8],
-           door_left: [0, 39.98, 0, 10, 40.02, 8], door_right: [11, 39.98, 0, 30, 40.02, 8],
-           5: [4, 0, 3, 7, 1.4, 4],         # intrados through the wall
-           6: [10, 0, 2, 11, 0.4, 3],       # a relief on the front face
-           7: [10, 39.2, 0, 11, 40, 3],     # a jamb between the two pieces of one face
-           8: [29.2, 0, 0, 30, 0.8, 8]}     # a pilaster at the corner of front and right
-    large = np.zeros(9, dtype=bool)
-    large[:5] = True
-    ra = np.array([5, 5, 6, 7, 7, 8, 8])
-    rb = np.array([front, back, front, door_left, door_right, front, right])
-    cnt = np.array([40, 30, 50, 20, 25, 10, 30])
-    got = set_in_walls(ra, rb, cnt, large, plane, box, np.zeros(3), 1.5)
-    assert got == {6: front, 7: door_right, 8: right}
 
 
 def test_stacked_pairs_join_stages_not_neighbours():
