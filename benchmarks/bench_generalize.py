@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from collections import defaultdict
@@ -47,17 +46,19 @@ from hollowtree.pipeline.coarse import COARSE_ALGORITHM  # noqa: E402
 from hollowtree.pipeline.evaluate import evaluate_inputs, machine  # noqa: E402
 from hollowtree.pipeline.tree_stage import TREE_ALGORITHM  # noqa: E402
 from hollowtree.scenes.metrics import VISIBLE_POINTS  # noqa: E402
-from hollowtree.scenes.procedural import FAMILIES, GENERATOR, family_of, scan_draw, split_seeds  # noqa: E402
+from hollowtree.scenes.procedural import (  # noqa: E402
+    FAMILIES,
+    GENERATOR,
+    family_of,
+    scan_draw,
+    site_points,
+    split_seeds,
+)
 from hollowtree.scenes.synth import synth  # noqa: E402
 from hollowtree.tiling.grid import GRID_ALGORITHM  # noqa: E402
 
 METHODS = {"tree": ("tree", []), "energy": ("tree", ["tree.decision=energy", "tree.verify=false"]),
            "ransac+dbscan": ("ransac+dbscan", [])}
-
-
-def _points(seed: int, lo: float, hi: float) -> int:
-    rng = np.random.default_rng(np.random.SeedSequence([seed, 7]))
-    return int(round(math.exp(rng.uniform(math.log(lo), math.log(hi))), -3))
 
 
 def _element_sizes(path: Path) -> dict[str, list[int]]:
@@ -115,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     scans = []
     for seed in seeds:
-        n = _points(seed, *args.points)
+        n = site_points(seed, *args.points)
         path = args.work / f"{GENERATOR}-{seed}-{n}.laz"
         if not path.exists():
             d = scan_draw(seed)

@@ -175,11 +175,16 @@ def fit_split_from_scenes(work: Path, *, scenes: tuple[int, ...] = TRAINING_SCEN
                           threshold: float = 0.5, on_scene: Callable[[int], None] | None = None,
                           files: tuple[Path, ...] = (), class_dim: str = "gt_class",
                           instance_dim: str = "gt_instance", class_map: dict[int, int] | None = None,
-                          procedural: tuple[int, ...] = (), procedural_points: int = 600_000):  # type: ignore[no-untyped-def]
+                          procedural: tuple[int, ...] = (),
+                          procedural_points: int | tuple[int, int] = 600_000):  # type: ignore[no-untyped-def]
     """Make (or reuse) the groups of every scene, procedural training site and labelled
-    file in ``work``, collect the proposals, fit. ``scenes=()`` leaves the random scenes out."""
+    file in ``work``, collect the proposals, fit. ``scenes=()`` leaves the random scenes out.
+    ``procedural_points``: points per procedural site, or a range ``(lo, hi)`` each site's
+    count is drawn from by its seed (:func:`scenes.procedural.site_points`)."""
     from hollowtree.errors import ConfigError
     from hollowtree.hollownet.predict import Classifier
+    from hollowtree.pipeline.workflow import load_workflow
+    from hollowtree.scenes.procedural import site_points
     from hollowtree.tree.fit_split import (
         GOOD_TARGET,
         SplitSamples,
@@ -189,29 +194,36 @@ def fit_split_from_scenes(work: Path, *, scenes: tuple[int, ...] = TRAINING_SCEN
 
     work.mkdir(parents=True, exist_ok=True)
     clf = Classifier.get(None)
+    mgp = load_workflow(_WORKFLOW, []).tree.max_group_points  # groups met as the tree stage meets them
     parts = []
     for i in scenes:
         d = np.load(training_groups(i, work))
-        parts.append(proposal_samples(d["xyz"], d["gc"], d["gi"], d["gstart"], clf, scene=f"s{i}"))
+        parts.append(proposal_samples(d["xyz"], d["gc"], d["gi"], d["gstart"], clf, scene=f"s{i}",
+                                      max_group_points=mgp))
         if on_scene is not None:
             on_scene(i)
     for seed in procedural:
-        d = np.load(procedural_groups(seed, work, n_points=procedural_points))
-        parts.append(proposal_samples(d["xyz"], d["gc"], d["gi"], d["gstart"], clf, scene=f"g{seed}"))
+        n = procedural_points if isinstance(procedural_points, int) else site_points(seed, *procedural_points)
+        d = np.load(procedural_groups(seed, work, n_points=n))
+        parts.append(proposal_samples(d["xyz"], d["gc"], d["gi"], d["gstart"], clf, scene=f"g{seed}",
+                                      max_group_points=mgp))
         if on_scene is not None:
             on_scene(seed)
     for k, f in enumerate(files):
         d = np.load(file_groups(f, work, class_dim=class_dim, instance_dim=instance_dim, class_map=class_map))
-        parts.append(proposal_samples(d["xyz"], d["gc"], d["gi"], d["gstart"], clf, scene=f"f{k}"))
+        parts.append(proposal_samples(d["xyz"], d["gc"], d["gi"], d["gstart"], clf, scene=f"f{k}",
+                                      max_group_points=mgp))
         if on_scene is not None:
             on_scene(-1 - k)
     if not any(len(p) for p in parts):
         raise ConfigError("no split proposals to fit: the scans hold no element group the tree could split")
     samples = SplitSamples.concat(parts)
     good = samples.target >= GOOD_TARGET
+    per_site = (f"{procedural_points:,} points" if isinstance(procedural_points, int)
+                else "{:,}-{:,} points, log-uniform by seed".format(*procedural_points))
     data = "element groups of workflows/local.yaml on " + " and ".join(
         ([f"{len(scenes)} random scenes"] if scenes else [])
-        + ([f"{len(procedural)} procedural training sites ({procedural_points:,} points)"] if procedural else [])
+        + ([f"{len(procedural)} procedural training sites ({per_site})"] if procedural else [])
         + ([f"{len(files)} labelled scans"] if files else []))
     if good.all() or not good.any():
         raise ConfigError(f"the scans give {len(samples)} split proposals, {int(good.sum())} of them right: the "

@@ -45,6 +45,7 @@ True
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -71,7 +72,8 @@ from hollowtree.scenes.mesh import TriMesh, concat_meshes
 from hollowtree.scenes.scene import Scene, SceneBuilder
 from hollowtree.scenes.shapes import ArcPath, StraightPath, box
 
-__all__ = ["FAMILIES", "GENERATOR", "SPLITS", "ScanDraw", "family_of", "procedural_site", "scan_draw", "split_seeds"]
+__all__ = ["FAMILIES", "GENERATOR", "SPLITS", "ScanDraw", "family_of", "procedural_site", "scan_draw", "site_points",
+           "split_seeds"]
 
 #: The generator's version, in the names of the scans made from it (a changed distribution
 #: makes new scans, never reuses old ones): ``gen-v2`` draws a site heading; ``gen-v3``
@@ -722,3 +724,18 @@ def scan_draw(seed: int) -> ScanDraw:
     """
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 99]))
     return ScanDraw(noise=float(rng.uniform(0.0015, 0.006)), registration_error=float(rng.uniform(0.0, 0.005)))
+
+
+#: The scan densities of the issue's sites, points per site (:func:`site_points`' default range).
+SITE_POINTS = (500_000, 20_000_000)
+
+
+def site_points(seed: int, lo: float = SITE_POINTS[0], hi: float = SITE_POINTS[1]) -> int:
+    """Points of the scan of ``seed``'s site, drawn log-uniformly from ``lo``-``hi`` (to the
+    thousand) by the seed; ``lo == hi`` gives that count.
+
+    >>> site_points(5, 5e5, 2e6), site_points(5, 4e6, 4e6)
+    (1017000, 4000000)
+    """
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 7]))
+    return int(round(math.exp(rng.uniform(math.log(lo), math.log(hi))), -3))

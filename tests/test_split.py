@@ -159,6 +159,25 @@ def test_proposal_samples_mark_the_bays_of_an_arcade_right():
     assert np.all(s.target[~wall] == 0.0)   # the bays are nodes too, and no split of one bay is right
 
 
+def test_proposal_samples_meet_a_large_group_as_a_sample_as_the_tree_stage_does():
+    pts = _piers()
+    bay = np.minimum((pts[:, 0] // 2.0).astype(int), 5)
+    gc = np.full(len(pts), 4)
+    args = (pts, gc, bay + 1, np.array([0, len(pts)]), _Agreeing())
+    whole = proposal_samples(*args, scene="piers", min_node=100)
+    cap = len(pts) // 2
+    sampled = proposal_samples(*args, scene="piers", min_node=100, max_group_points=cap)
+    n_parent = FEATURE_NAMES.index("log10_n_parent")
+    root = sampled.node == "piers/0/0"
+    assert np.allclose(whole.features[whole.node == "piers/0/0", n_parent], np.log10(len(pts)))
+    assert np.all(np.abs(10 ** sampled.features[root, n_parent] / cap - 1) < 0.1)  # about cap points
+    assert sampled.target[root].max() >= 0.5   # the sample's bays are still right
+    again = proposal_samples(*args, scene="piers", min_node=100, max_group_points=cap)
+    np.testing.assert_array_equal(again.features, sampled.features)  # seeded
+    same = proposal_samples(*args, scene="piers", min_node=100, max_group_points=len(pts))
+    np.testing.assert_array_equal(same.features, whole.features)     # at or under the cap: whole
+
+
 def test_tree_with_the_split_model_keeps_or_refuses_by_its_probability():
     pts = _piers()
     always = SplitModel(init=5.0, learning_rate=0.1, trees=(), threshold=0.5)

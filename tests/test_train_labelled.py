@@ -154,6 +154,32 @@ def test_the_split_model_fits_on_training_seeds_only(tmp_path):
         procedural_groups(200_000, tmp_path)
 
 
+def test_fit_split_draws_each_procedural_sites_points_from_a_range(tmp_path, monkeypatch):
+    """``fit-split --procedural-points MIN MAX`` scans each site at the count its seed draws
+    (``site_points``), as ``bench_generalize --points MIN MAX`` does; a reversed range is one line."""
+    from hollowtree.pipeline import split_fit
+    from hollowtree.scenes.procedural import site_points
+
+    asked = []
+
+    def groups(seed, work, *, n_points):
+        asked.append((seed, n_points))
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(split_fit, "procedural_groups", groups)
+    with pytest.raises(RuntimeError, match="stop here"):
+        split_fit.fit_split_from_scenes(tmp_path, scenes=(), procedural=(4,), procedural_points=(500_000, 20_000_000))
+    assert asked == [(4, site_points(4, 500_000, 20_000_000))]
+    assert 500_000 <= asked[0][1] <= 20_000_000
+    assert site_points(4, 3e6, 3e6) == 3_000_000
+    assert {site_points(s, 5e5, 2e7) for s in range(20)} != {asked[0][1]}  # the seed draws it
+    proc = _cli("fit-split", "--procedural", "2", "--procedural-points", "900000", "800000",
+                "--out", str(tmp_path / "s.json"))
+    assert proc.returncode == 2
+    assert len(proc.stderr.strip().splitlines()) == 1
+    assert "--procedural-points takes N or MIN MAX with MIN <= MAX; got 900000 800000" in proc.stderr
+
+
 def test_procedural_samples_are_the_ones_train_from_takes_of_the_same_scan(tmp_path):
     """``train --procedural N`` cuts the samples ``--from`` cuts from the same procedural
     scan (cached once), and takes training seeds only."""

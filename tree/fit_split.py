@@ -134,12 +134,14 @@ def proposal_samples(
     n_seeds: int = 3,
     min_node: int = 2000,
     max_depth: int = BuildParams.max_depth,
+    max_group_points: int = 0,
 ) -> SplitSamples:
     """The proposals of one scene's element groups (module docstring).
 
     ``xyz`` are the coarse segments' points in group order, ``starts`` the first row of
     every group and the row count last; ``gt_class`` and ``gt_instance`` each point's
-    ground truth.
+    ground truth. A group of more than ``max_group_points`` points (0: none) is met as the
+    tree stage meets it: as a seeded random sample of about that many points.
     """
     params = params or SequenceParams()
     a = np.asarray(xyz, dtype=np.float64)
@@ -153,9 +155,13 @@ def proposal_samples(
         lo, hi = int(gs[g]), int(gs[g + 1])
         if hi - lo < min_node:
             continue
-        pts = a[lo:hi] - a[lo:hi].mean(axis=0)
-        parts = _parts(gc[lo:hi], gi[lo:hi])
-        queue: list[tuple[int, IntArray, int]] = [(0, np.arange(hi - lo, dtype=np.int64), 0)]
+        rows = np.arange(lo, hi)
+        if max_group_points and hi - lo > max_group_points:
+            keep = np.random.default_rng(np.random.SeedSequence([g, 1])).random(hi - lo) < max_group_points / (hi - lo)
+            rows = rows[keep]
+        pts = a[rows] - a[rows].mean(axis=0)
+        parts = _parts(gc[rows], gi[rows])
+        queue: list[tuple[int, IntArray, int]] = [(0, np.arange(len(rows), dtype=np.int64), 0)]
         if parts.max() > 0:
             queue += [(q + 1, np.flatnonzero(parts == q), 0) for q in range(int(parts.max()) + 1)]
         n_nodes = len(queue)
