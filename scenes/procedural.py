@@ -726,11 +726,7 @@ def scan_draw(seed: int) -> ScanDraw:
     return ScanDraw(noise=float(rng.uniform(0.0015, 0.006)), registration_error=float(rng.uniform(0.0, 0.005)))
 
 
-#: The scan densities of the issue's sites, points per site (:func:`site_points`' default range).
-SITE_POINTS = (500_000, 20_000_000)
-
-
-def site_points(seed: int, lo: float = SITE_POINTS[0], hi: float = SITE_POINTS[1]) -> int:
+def site_points(seed: int, lo: float, hi: float) -> int:
     """Points of the scan of ``seed``'s site, drawn log-uniformly from ``lo``-``hi`` (to the
     thousand) by the seed; ``lo == hi`` gives that count.
 
