@@ -23,6 +23,8 @@ from hollowtree.pipeline.cli_args import (
     _int_list,
     _param_flag,
     _positive_int,
+    _procedural_points,
+    _procedural_points_flag,
     _section,
     _set_flag,
     _stage_flag,
@@ -199,9 +201,7 @@ def build_parser() -> argparse.ArgumentParser:
     fs.add_argument("--no-progress", action="store_true", help="no progress bar")
     fs.add_argument("--procedural", type=int, default=0, metavar="N",
                     help="add the first N procedural training sites (scenes/procedural.py; training seeds only)")
-    fs.add_argument("--procedural-points", type=_positive_int, nargs="+", default=[600_000], metavar="N",
-                    help="points per procedural site, or MIN MAX: each site's count drawn log-uniformly by its "
-                         "seed (default 600,000)")
+    _procedural_points_flag(fs, 600_000)
     add_labelled_args(fs, "element groups")
 
     r = _command(sub, "run", _cmd_run, help="run a workflow YAML: ingest -> coarse -> tree -> labels -> outputs",
@@ -352,9 +352,7 @@ def _cmd_fit_split(args: argparse.Namespace) -> int:
     if args.no_synthetic and not args.labelled and not args.procedural:
         raise ConfigError("--no-synthetic needs at least one --from FILE or --procedural N")
     procedural = tuple(split_seeds("train", args.procedural)) if args.procedural else ()
-    pts = args.procedural_points
-    if len(pts) > 2 or (len(pts) == 2 and pts[0] > pts[1]):
-        raise ConfigError(f"--procedural-points takes N or MIN MAX with MIN <= MAX; got {' '.join(map(str, pts))}")
+    pts = _procedural_points(args)
     for f in args.labelled:
         if not f.is_file():
             raise ConfigError(f"--from {f}: file does not exist")
@@ -365,7 +363,7 @@ def _cmd_fit_split(args: argparse.Namespace) -> int:
                                       on_scene=lambda i: bar.update(1), files=tuple(args.labelled),
                                       class_dim=args.class_dim, instance_dim=args.instance_dim,
                                       class_map=class_map_of(args.class_map), procedural=procedural,
-                                      procedural_points=pts[0] if len(pts) == 1 else (pts[0], pts[1]))
+                                      procedural_points=pts)
     model.save(args.out)
     info = model.info
     print(f"{args.out}: {info['samples']} proposals ({info['right']} right) from {info['scenes']} scenes, "

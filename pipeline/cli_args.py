@@ -25,6 +25,30 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _procedural_points_flag(parser: argparse.ArgumentParser, default: int) -> None:
+    """``--procedural-points N`` or ``MIN MAX`` (``train`` and ``fit-split``); read with
+    :func:`_procedural_points`."""
+    parser.add_argument("--procedural-points", type=_positive_int, nargs="+", default=[default], metavar="N",
+                        help="points per procedural site, or MIN MAX: each site's count drawn log-uniformly by "
+                             f"its seed (scenes.procedural.site_points; default {default:,})")
+
+
+def _procedural_points(args: argparse.Namespace) -> int | tuple[int, int]:
+    """The value of ``--procedural-points``: one count, or a range ``(MIN, MAX)``.
+
+    Raises
+    ------
+    ConfigError
+        If it holds more than two numbers or MIN > MAX.
+    """
+    from hollowtree.errors import ConfigError
+
+    pts = args.procedural_points
+    if len(pts) > 2 or (len(pts) == 2 and pts[0] > pts[1]):
+        raise ConfigError(f"--procedural-points takes N or MIN MAX with MIN <= MAX; got {' '.join(map(str, pts))}")
+    return pts[0] if len(pts) == 1 else (pts[0], pts[1])
+
+
 def _float(text: str) -> float:
     try:
         return float(text)

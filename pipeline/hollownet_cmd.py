@@ -23,7 +23,7 @@ import numpy as np
 import yaml
 
 from hollowtree.errors import ConfigError, InputFileError, PipelineError
-from hollowtree.pipeline.cli_args import _positive_int
+from hollowtree.pipeline.cli_args import _positive_int, _procedural_points, _procedural_points_flag
 
 __all__ = ["add_labelled_args", "add_parsers", "class_map_of", "cmd_classify", "cmd_train", "procedural_samples",
            "read_labelled"]
@@ -53,8 +53,7 @@ def add_parsers(sub: Any) -> None:
     t.add_argument("--procedural", type=int, default=0, metavar="N",
                    help="add samples cut from the first N procedural training sites (scenes/procedural.py; "
                         "training seeds only), each scanned with its seed's noise and registration error")
-    t.add_argument("--procedural-points", type=_positive_int, default=2_000_000,
-                   help="points per procedural site (default 2,000,000)")
+    _procedural_points_flag(t, 2_000_000)
     t.set_defaults(func=cmd_train)
 
     c = sub.add_parser(
@@ -105,15 +104,17 @@ def cmd_train(args: argparse.Namespace) -> int:
         raise ConfigError(f"--procedural must be a count >= 0; got {args.procedural}")
     if args.no_synthetic and not args.labelled and not args.procedural:
         raise ConfigError("--no-synthetic needs at least one --from FILE or --procedural N")
+    pts = _procedural_points(args)
     class_map = class_map_of(args.class_map)
     labelled = []
     if args.procedural:
         from hollowtree.hollownet.train import default_data_dir
-        from hollowtree.scenes.procedural import split_seeds
+        from hollowtree.scenes.procedural import site_points, split_seeds
 
         cache = Path(config.data_dir) if config.data_dir else default_data_dir()
         for seed in split_seeds("train", args.procedural):
-            name, tr, te = procedural_samples(seed, args.procedural_points, cache, seed=config.seed,
+            n = pts if isinstance(pts, int) else site_points(seed, *pts)
+            name, tr, te = procedural_samples(seed, n, cache, seed=config.seed,
                                               variants=config.variants)
             print(f"procedural site {seed}: {len(tr['labels'])} training and {len(te['labels'])} test samples")
             labelled.append((name, tr, te))

@@ -180,6 +180,29 @@ def test_fit_split_draws_each_procedural_sites_points_from_a_range(tmp_path, mon
     assert "--procedural-points takes N or MIN MAX with MIN <= MAX; got 900000 800000" in proc.stderr
 
 
+def test_train_draws_each_procedural_sites_points_from_a_range(tmp_path, monkeypatch):
+    """``train --procedural-points MIN MAX`` cuts each site's samples from a scan at the count
+    its seed draws, the count ``fit-split`` scans it at; one number stays one count."""
+    from hollowtree.pipeline import cli, hollownet_cmd
+    from hollowtree.scenes.procedural import site_points
+
+    asked = []
+
+    def samples(site_seed, n_points, cache, **kw):
+        asked.append((site_seed, n_points))
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(hollownet_cmd, "procedural_samples", samples)
+    for pts in (["500000", "20000000"], ["700000"]):
+        with pytest.raises(RuntimeError, match="stop here"):
+            cli.main(["train", "--procedural", "3", "--procedural-points", *pts, "--data-dir", str(tmp_path),
+                      "--out", str(tmp_path / "w.pt")])
+    assert asked == [(0, site_points(0, 500_000, 20_000_000)), (0, 700_000)]
+    proc = _cli("train", "--procedural", "2", "--procedural-points", "5", "6", "7", "--out", str(tmp_path / "w.pt"))
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == "hollowtree train: error: --procedural-points takes N or MIN MAX with MIN <= MAX; got 5 6 7"
+
+
 def test_procedural_samples_are_the_ones_train_from_takes_of_the_same_scan(tmp_path):
     """``train --procedural N`` cuts the samples ``--from`` cuts from the same procedural
     scan (cached once), and takes training seeds only."""
