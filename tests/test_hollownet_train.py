@@ -91,3 +91,43 @@ def test_refusals(data_dir, tmp_path):
         TrainConfig(epochs=0)
     with pytest.raises(ConfigError, match="does not exist"):
         train(_config(data_dir), out=tmp_path / "no" / "w.pt", progress=False)
+
+
+def test_a_contaminated_sample_takes_the_nearest_strip_of_one_neighbour():
+    from hollowtree.hollownet.dataset import _with_neighbour
+
+    rng = np.random.default_rng(3)
+    # an element (instance 1, a 1 m column) between a wall (2) touching it and a far wall (3)
+    col = np.c_[rng.uniform(-0.2, 0.2, (2000, 2)), rng.uniform(0, 3, 2000)]
+    wall = np.c_[rng.uniform(0.25, 4.0, 3000), rng.uniform(-1, 1, 3000), rng.uniform(0, 3, 3000)]
+    far = np.c_[rng.uniform(-9, -8, 500), rng.uniform(-1, 1, 500), rng.uniform(0, 3, 500)]
+    xyz = np.concatenate([col, wall, far])
+    inst = np.r_[np.full(2000, 1), np.full(3000, 2), np.full(500, 3)]
+    out = _with_neighbour(col, xyz, inst, 1, rng)
+    added = out[len(col):]
+    assert (out[:len(col)] == col).all()
+    assert 0.03 * len(col) - 1 <= len(added) <= 0.25 * len(col) + 1
+    assert (added[:, 0] >= 0.25).all()  # wall points only, none of the far wall
+    # the nearest of the wall's points: none left out is nearer the column than one taken
+    from scipy.spatial import cKDTree
+
+    taken = {tuple(p) for p in added}
+    rest = np.array([p for p in wall if tuple(p) not in taken])
+    near = cKDTree(col)
+    assert near.query(rest)[0].min() >= near.query(added)[0].max()
+    # nothing within reach: the sample unchanged
+    alone = _with_neighbour(col, np.concatenate([col, far]), np.r_[np.full(2000, 1), np.full(500, 3)], 1, rng)
+    assert len(alone) == len(col)
+
+
+def test_contamination_is_off_by_default_and_keeps_the_old_cache_and_fingerprint():
+    assert DatasetParams().contaminate == 0.0
+    p = DatasetParams(seed=0, n_per_class=2, variants=2)
+    assert p.key() != DatasetParams(seed=0, n_per_class=2, variants=2, contaminate=0.4).key()
+    assert TrainConfig().fingerprint() != TrainConfig(contaminate=0.4).fingerprint()
+    # the test set is never contaminated, so test accuracies stay comparable
+    train_set, test_set = TrainConfig(contaminate=0.4).datasets()
+    assert train_set.contaminate == 0.4
+    assert test_set.contaminate == 0.0
+    with pytest.raises(ConfigError):
+        TrainConfig.from_dict({"contaminate": 1.5})
