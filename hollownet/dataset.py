@@ -38,7 +38,6 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial import cKDTree
 
 from hollowtree.classes import ELEMENT_CLASSES, ClassId
 from hollowtree.errors import ConfigError, CorruptInputError, InputFileError
@@ -82,9 +81,6 @@ class DatasetParams(Params, owner="DatasetParams"):
                                        "as many)")
     grid_size: int = param(GRID_SIZE, ge=1, doc="edge of the voxel grid, cells")
     canonical_yaw: bool = param(True, doc="voxelise with the footprint's principal axis along x")
-    contaminate: float = param(0.0, ge=0, le=1, doc="share of element samples (arch, dome, minaret, pillar) that "
-                                                     "carry a strip of the instance they touch most, 3-25 % of "
-                                                     "their points, keeping their class: a tree's imperfect cut")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -98,10 +94,7 @@ class DatasetParams(Params, owner="DatasetParams"):
 
     def key(self) -> str:
         """Folder name of the cached data set: readable fields plus a hash of all."""
-        d = self.to_dict()
-        if not d["contaminate"]:  # data sets made before the field keep their folders
-            del d["contaminate"]
-        h = hashlib.sha256(json.dumps([DATASET_VERSION, d], sort_keys=True).encode()).hexdigest()[:10]
+        h = hashlib.sha256(json.dumps([DATASET_VERSION, self.to_dict()], sort_keys=True).encode()).hexdigest()[:10]
         return f"{self.split}-seed{self.seed}-n{self.n_per_class}-{h}"
 
 
@@ -160,28 +153,6 @@ def _cut(p: npt.NDArray[np.float64], cls: ClassId, rng: np.random.Generator) -> 
     if cls == ClassId.OTHER and rng.random() < 0.2:
         return _crop_plane(p, rng, 0.6, 0.95)
     return np.ones(len(p), dtype=bool)
-
-
-def _with_neighbour(q: npt.NDArray[np.float64], xyz: npt.NDArray[np.float64], inst: npt.NDArray[np.int64],
-                    own: int, rng: np.random.Generator, reach: float = 1.0) -> npt.NDArray[np.float64]:
-    """``q`` (points of instance ``own``) plus a strip of the instance it touches most: of that
-    instance's points within ``reach`` of ``q``, the nearest ones, 3 to 25 % of ``len(q)``.
-    A tree's cut that missed the element's border by a little looks like this."""
-    lo, hi = q.min(axis=0) - reach, q.max(axis=0) + reach
-    cand = np.flatnonzero(np.all((xyz >= lo) & (xyz <= hi), axis=1) & (inst != own))
-    if len(cand) == 0:
-        return q
-    ref = q if len(q) <= 20_000 else q[rng.choice(len(q), 20_000, replace=False)]
-    d, _ = cKDTree(ref).query(xyz[cand], distance_upper_bound=reach)
-    near = d < reach
-    if not near.any():
-        return q
-    cand, d = cand[near], d[near]
-    ids, counts = np.unique(inst[cand], return_counts=True)
-    mine = inst[cand] == ids[np.argmax(counts)]
-    cand, d = cand[mine], d[mine]
-    k = max(1, round(rng.uniform(0.03, 0.25) * len(q)))
-    return np.concatenate([q, xyz[cand[np.argsort(d, kind="stable")[:k]]]])
 
 
 def _shows_faces(p: npt.NDArray[np.float64]) -> bool:
@@ -273,8 +244,6 @@ def generate_samples(
                 q = p[_cut(p, cls, rng)]
                 if len(q) < _MIN_POINTS or (cls == ClassId.ROOF and not _shows_faces(q)):
                     continue
-                if params.contaminate and cls in ELEMENT_CLASSES and rng.random() < params.contaminate:
-                    q = _with_neighbour(q, xyz, inst, int(i), rng)
                 if len(q) > _MAX_POINTS:  # bounds memory; a 30^3 grid needs far fewer
                     q = q[rng.choice(len(q), _MAX_POINTS, replace=False)]
                 cut.append((cls, _augment(q, rng)))

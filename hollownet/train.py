@@ -78,7 +78,6 @@ class TrainConfig(Params, owner="TrainConfig"):
     n_train: int = param(400, ge=1, doc="training samples of every output class")
     n_test: int = param(60, ge=1, doc="test samples of every output class (other scenes)")
     variants: int = like(DatasetParams, "variants")
-    contaminate: float = like(DatasetParams, "contaminate")
     epochs: int = param(16, ge=1, doc="passes over the training set")
     batch_size: int = param(32, ge=1, doc="samples per optimiser step")
     lr: float = param(0.001, gt=0, lt=10, doc="Adam's learning rate (cosine decay to 0 over the epochs)")
@@ -104,14 +103,10 @@ class TrainConfig(Params, owner="TrainConfig"):
     def fingerprint(self) -> str:
         """Hash of everything that changes the result (``data_dir`` and ``threads`` do not)."""
         d = {k: v for k, v in self.to_dict().items() if k not in ("data_dir", "threads", "epochs")}
-        if not d["contaminate"]:  # runs made before the field resume
-            del d["contaminate"]
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
     def datasets(self) -> tuple[DatasetParams, DatasetParams]:
-        """The training set, and the test set (never contaminated: its accuracy stays comparable)."""
-        return (DatasetParams(seed=self.seed, split="train", n_per_class=self.n_train, variants=self.variants,
-                              contaminate=self.contaminate),
+        return (DatasetParams(seed=self.seed, split="train", n_per_class=self.n_train, variants=self.variants),
                 DatasetParams(seed=self.seed, split="test", n_per_class=self.n_test, variants=self.variants))
 
 
